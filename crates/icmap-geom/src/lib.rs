@@ -1,0 +1,32 @@
+//! # icmap-geom
+//!
+//! The geometry core of icmapper: the global vector-map store with its spatial index, patch
+//! clipping and even sampling, curve-fit merging of polylines, polygon union of crossings and
+//! Chamfer distances. Pure Rust: no Python in this crate (the binding lives in `icmap-py`).
+//!
+//! Conventions (see the project's `docs/architecture.md`): metres and radians, world frame
+//! coordinates in `f64`, poses as `(x, y, yaw)` ego -> world, classes `0 ped_crossing` (closed
+//! polygon), `1 divider`, `2 boundary` (open polylines).
+
+pub mod chamfer;
+pub mod clip;
+pub mod error;
+pub mod fit;
+pub mod geojson;
+pub mod index;
+pub mod merge;
+pub mod persist;
+pub mod resample;
+pub mod store;
+pub mod types;
+pub mod union;
+
+pub use chamfer::{chamfer_distance, chamfer_matrix};
+pub use clip::{clip_polygon, clip_polyline, sample_pieces};
+pub use error::{GeomError, Result};
+pub use fit::fit_curve;
+pub use merge::{merge_polygon, merge_polyline};
+pub use resample::{dedup, polyline_length, resample, resample_spacing};
+pub use store::{GlobalMap, Instance, MapConfig, PatchSample};
+pub use types::{validate_points, MapClass, Patch, Point, Pose2};
+pub use union::polygon_union;

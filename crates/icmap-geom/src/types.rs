@@ -1,0 +1,152 @@
+//! Basic types: points, map classes, 2-D poses and oriented patches.
+
+use crate::error::{GeomError, Result};
+use nalgebra::{Isometry2, Point2, Vector2};
+use parry2d_f64::bounding_volume::Aabb;
+
+/// A point in metres (world or ego frame, as the function says).
+pub type Point = Point2<f64>;
+
+/// Map element classes, in StreamMapNet's order.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+#[repr(u8)]
+pub enum MapClass {
+    /// Pedestrian crossing: a closed polygon.
+    PedCrossing = 0,
+    /// Lane divider: an open polyline.
+    Divider = 1,
+    /// Road boundary: an open polyline.
+    Boundary = 2,
+}
+
+impl MapClass {
+    /// All classes in index order.
+    pub const ALL: [MapClass; 3] = [MapClass::PedCrossing, MapClass::Divider, MapClass::Boundary];
+
+    /// Whether instances of this class are closed contours (only crossings).
+    pub fn is_closed(self) -> bool {
+        matches!(self, MapClass::PedCrossing)
+    }
+
+    /// The class index (0, 1, 2).
+    pub fn index(self) -> u8 {
+        self as u8
+    }
+
+    /// The class name used in files and tables.
+    pub fn name(self) -> &'static str {
+        match self {
+            MapClass::PedCrossing => "ped_crossing",
+            MapClass::Divider => "divider",
+            MapClass::Boundary => "boundary",
+        }
+    }
+}
+
+impl TryFrom<i64> for MapClass {
+    type Error = GeomError;
+    fn try_from(v: i64) -> Result<Self> {
+        match v {
+            0 => Ok(MapClass::PedCrossing),
+            1 => Ok(MapClass::Divider),
+            2 => Ok(MapClass::Boundary),
+            other => Err(GeomError::UnknownClass(other)),
+        }
+    }
+}
+
+/// A 2-D pose ego -> world: position `(x, y)` in metres and heading `yaw` in radians.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Pose2 {
+    pub x: f64,
+    pub y: f64,
+    pub yaw: f64,
+}
+
+impl Pose2 {
+    /// A pose; errors if any component is not finite.
+    pub fn new(x: f64, y: f64, yaw: f64) -> Result<Self> {
+        if !(x.is_finite() && y.is_finite() && yaw.is_finite()) {
+            return Err(GeomError::NonFinite { what: "pose".into() });
+        }
+        Ok(Pose2 { x, y, yaw })
+    }
+
+    /// The isometry ego -> world.
+    pub fn isometry(&self) -> Isometry2<f64> {
+        Isometry2::new(Vector2::new(self.x, self.y), self.yaw)
+    }
+
+    /// Maps an ego-frame point to the world frame.
+    pub fn to_world(&self, p: &Point) -> Point {
+        self.isometry() * p
+    }
+
+    /// Maps a world-frame point to the ego frame.
+    pub fn to_ego(&self, p: &Point) -> Point {
+        self.isometry().inverse_transform_point(p)
+    }
+}
+
+/// An oriented rectangle in the world: centred on `pose`, `half_extents` along the ego x and y axes
+/// (already including any margin).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Patch {
+    pub pose: Pose2,
+    pub half_extents: Vector2<f64>,
+}
+
+impl Patch {
+    /// The patch of `pose` with half extents `(hx + margin, hy + margin)`. Errors on non-finite
+    /// values or on negative resulting extents (a negative `hx`, `hy` or `margin` is rejected).
+    pub fn new(pose: Pose2, hx: f64, hy: f64, margin: f64) -> Result<Self> {
+        for (name, v) in [("half_extents", hx), ("half_extents", hy), ("margin", margin)] {
+            if !v.is_finite() {
+                return Err(GeomError::NonFinite { what: name.into() });
+            }
+            if v < 0.0 {
+                return Err(GeomError::InvalidParameter {
+                    name: if name == "margin" { "margin" } else { "half_extents" },
+                    reason: format!("must be >= 0, got {v}"),
+                });
+            }
+        }
+        Ok(Patch { pose, half_extents: Vector2::new(hx + margin, hy + margin) })
+    }
+
+    /// Whether a world point lies inside the patch (boundary included).
+    pub fn contains(&self, p: &Point) -> bool {
+        let e = self.pose.to_ego(p);
+        e.x.abs() <= self.half_extents.x && e.y.abs() <= self.half_extents.y
+    }
+
+    /// The four corners in the world frame, counter-clockwise.
+    pub fn corners(&self) -> [Point; 4] {
+        let (hx, hy) = (self.half_extents.x, self.half_extents.y);
+        [(-hx, -hy), (hx, -hy), (hx, hy), (-hx, hy)].map(|(x, y)| self.pose.to_world(&Point::new(x, y)))
+    }
+
+    /// The world-axis-aligned bounding box of the patch.
+    pub fn world_aabb(&self) -> Aabb {
+        let c = self.corners();
+        let mut mins = c[0];
+        let mut maxs = c[0];
+        for p in &c[1..] {
+            mins = mins.inf(p);
+            maxs = maxs.sup(p);
+        }
+        Aabb::new(mins, maxs)
+    }
+}
+
+/// Checks that `points` has at least `min` points and only finite coordinates; `what` names the
+/// geometry in the error message.
+pub fn validate_points(points: &[Point], min: usize, what: &str) -> Result<()> {
+    if points.len() < min {
+        return Err(GeomError::TooFewPoints { what: what.into(), got: points.len(), min });
+    }
+    if points.iter().any(|p| !(p.x.is_finite() && p.y.is_finite())) {
+        return Err(GeomError::NonFinite { what: what.into() });
+    }
+    Ok(())
+}

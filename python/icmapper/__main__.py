@@ -1,0 +1,5 @@
+import sys
+
+from icmapper.cli import main
+
+sys.exit(main())

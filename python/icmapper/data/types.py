@@ -1,0 +1,201 @@
+"""Typed containers shared by every part of icmapper: map instances, world maps, camera rigs,
+frames, sequences and per-frame / global ground truth.
+
+Conventions (docs/architecture.md): metres, seconds, radians; world frame = the map/city frame with
+z up; ego frame x forward, y left, z up; a pose is SE(3) ego->world as a (4, 4) float64 matrix;
+classes 0 ped_crossing (closed), 1 divider, 2 boundary (open). This module holds no I/O.
+"""
+
+from __future__ import annotations
+
+import enum
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+#: Number of points of a network instance (evenly spaced by arc length).
+NUM_INSTANCE_POINTS = 20
+
+
+class MapClass(enum.IntEnum):
+    """Map element classes, in StreamMapNet's order."""
+
+    PED_CROSSING = 0
+    DIVIDER = 1
+    BOUNDARY = 2
+
+    @property
+    def closed(self) -> bool:
+        """Crossings are closed polygons; dividers and boundaries open polylines."""
+        return self is MapClass.PED_CROSSING
+
+
+CLASS_NAMES: tuple[str, ...] = ("ped_crossing", "divider", "boundary")
+NUM_CLASSES = len(CLASS_NAMES)
+
+
+@dataclass(frozen=True)
+class PerceptionRange:
+    """An ego-centred, axis-aligned perception range: x in [-half_x, half_x], y in [-half_y, half_y]."""
+
+    half_x: float
+    half_y: float
+
+    @property
+    def name(self) -> str:
+        return f"{2 * self.half_x:g}x{2 * self.half_y:g}"
+
+    @staticmethod
+    def from_name(name: str) -> PerceptionRange:
+        """Parses "60x30" / "100x50" (full extents, metres)."""
+        try:
+            sx, sy = name.lower().split("x")
+            rng = PerceptionRange(float(sx) / 2.0, float(sy) / 2.0)
+        except ValueError:
+            raise ValueError(f"bad perception range {name!r}; expected e.g. '60x30'") from None
+        if rng.half_x <= 0 or rng.half_y <= 0:
+            raise ValueError(f"perception range {name!r} must be positive")
+        return rng
+
+
+RANGE_60x30 = PerceptionRange(30.0, 15.0)
+RANGE_100x50 = PerceptionRange(50.0, 25.0)
+
+
+@dataclass
+class MapInstance:
+    """One map element in the world frame.
+
+    points: (n, 2) float64 world coordinates; a closed crossing is a ring without a repeated point.
+    style: how it is painted ("solid_white", "dashed_white", "solid_yellow", "double_yellow",
+    "dashed_yellow", "curb", "zebra", ...); "" when unknown.
+    """
+
+    id: int
+    cls: MapClass
+    points: NDArray[np.float64]
+    closed: bool
+    style: str = ""
+
+
+@dataclass
+class LaneSegment:
+    """A lane of the lane graph: centreline (n, 2) float64 world, successor lane ids, width (m)."""
+
+    id: int
+    centerline: NDArray[np.float64]
+    successors: tuple[int, ...]
+    width: float = 3.5
+
+
+@dataclass
+class WorldMap:
+    """The static world of a city or log: map instances (with true identity), drivable-area
+    polygons (each (n, 2) float64) and the lane graph used to drive an ego through it."""
+
+    name: str
+    instances: list[MapInstance]
+    drivable: list[NDArray[np.float64]] = field(default_factory=list)
+    lanes: dict[int, LaneSegment] = field(default_factory=dict)
+
+
+@dataclass
+class CameraRig:
+    """Cameras of a vehicle. intrinsics (C, 3, 3) float64 pixels; cam_to_ego (C, 4, 4) float64
+    (camera frame: x right, y down, z forward); image_size (H, W) of every camera."""
+
+    names: tuple[str, ...]
+    intrinsics: NDArray[np.float64]
+    cam_to_ego: NDArray[np.float64]
+    image_size: tuple[int, int]
+
+    @property
+    def num_cameras(self) -> int:
+        return len(self.names)
+
+
+@dataclass
+class Frame:
+    """One keyframe. pose (4, 4) float64 ego->world; images (C, 3, H, W) uint8 or None when the
+    source has no images."""
+
+    index: int
+    timestamp: float
+    pose: NDArray[np.float64]
+    rig: CameraRig
+    images: NDArray[np.uint8] | None = None
+
+
+@dataclass
+class Sequence:
+    """A drive through a world: T keyframes (timestamps (T,) seconds, poses (T, 4, 4)), the world
+    it drives through (ground truth with identity) and, optionally, a renderer of its images.
+
+    render(i) -> (C, 3, H, W) uint8 images of frame i (None: the source has no images).
+    """
+
+    name: str
+    source: str
+    world: WorldMap
+    timestamps: NDArray[np.float64]
+    poses: NDArray[np.float64]
+    rig: CameraRig
+    render: Callable[[int], NDArray[np.uint8]] | None = None
+
+    def __len__(self) -> int:
+        return int(self.timestamps.shape[0])
+
+    def frame(self, i: int, with_images: bool = True) -> Frame:
+        if not -len(self) <= i < len(self):
+            raise IndexError(f"frame {i} out of range for sequence {self.name!r} of {len(self)} frames")
+        i %= len(self)
+        images = self.render(i) if (with_images and self.render is not None) else None
+        return Frame(i, float(self.timestamps[i]), self.poses[i], self.rig, images)
+
+
+@dataclass
+class FrameGT:
+    """Ground truth of one frame in the ego frame, for one perception range.
+
+    ids (k,) int64 stable across frames; classes (k,) int64; points (k, 20, 2) float32 ego frame,
+    evenly spaced by arc length (closed crossings along the contour, first point not repeated).
+    """
+
+    ids: NDArray[np.int64]
+    classes: NDArray[np.int64]
+    points: NDArray[np.float32]
+
+    def __len__(self) -> int:
+        return int(self.ids.shape[0])
+
+
+def pose_to_xy_yaw(pose: NDArray[np.float64]) -> tuple[float, float, float]:
+    """(4, 4) SE(3) ego->world -> (x, y, yaw) for the 2-D map engine."""
+    pose = np.asarray(pose, dtype=np.float64)
+    if pose.shape != (4, 4):
+        raise ValueError(f"pose must have shape (4, 4), got {pose.shape}")
+    if not np.all(np.isfinite(pose)):
+        raise ValueError("pose contains NaN or inf")
+    return float(pose[0, 3]), float(pose[1, 3]), float(np.arctan2(pose[1, 0], pose[0, 0]))
+
+
+def xy_yaw_to_pose(x: float, y: float, yaw: float, z: float = 0.0) -> NDArray[np.float64]:
+    """(x, y, yaw) -> (4, 4) SE(3) ego->world (flat ground)."""
+    c, s = np.cos(yaw), np.sin(yaw)
+    pose = np.eye(4)
+    pose[:2, :2] = [[c, -s], [s, c]]
+    pose[:3, 3] = [x, y, z]
+    return pose
+
+
+def world_to_ego(points: NDArray[np.float64], pose: NDArray[np.float64]) -> NDArray[np.float64]:
+    """(n, 2) world points -> (n, 2) ego points for the (4, 4) ego->world pose (planar)."""
+    r = pose[:2, :2]  # (2, 2)
+    return (np.asarray(points, dtype=np.float64) - pose[:2, 3]) @ r  # (n, 2)
+
+
+def ego_to_world(points: NDArray[np.floating], pose: NDArray[np.float64]) -> NDArray[np.float64]:
+    """(n, 2) ego points -> (n, 2) world points for the (4, 4) ego->world pose (planar)."""
+    return np.asarray(points, dtype=np.float64) @ pose[:2, :2].T + pose[:2, 3]  # (n, 2)
