@@ -1,0 +1,262 @@
+"""Inference-time association: matching detections to tracked instances and keeping the tracking
+buffer (IC-Mapper Fig. 2, "inference association").
+
+The tracker is generic over an affinity matrix: the learned association network (IC-Mapper), or
+`positional_affinity` (Chamfer distance; Post-Track and the oracle source, which has no query
+features). Per frame: pairs with score >= threshold and the same class are candidates, a one-to-one
+assignment maximises the summed score (Hungarian), unmatched detections open new tracks with fresh
+ids (a counter owned by the Tracker instance), matched tracks take the detection's geometry, and
+tracks not seen for more than ``max_age`` frames are dropped.
+
+The buffer keeps geometry in the WORLD frame, so that it can be shown to the association network in
+any later ego frame (`Tracker.tracks_in_ego`). This module holds no network and no I/O.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.optimize import linear_sum_assignment
+
+from icmapper.data.types import ego_to_world, world_to_ego
+
+#: Default length scale (metres) of `positional_affinity`: exp(-chamfer / scale).
+DEFAULT_AFFINITY_SCALE = 1.0
+
+
+@dataclass
+class Track:
+    """One entry of the tracking buffer.
+
+    id: track id; cls: class index; points (n, 2) float64 WORLD frame (the last geometry seen);
+    query (D,) float32 decoder feature of the last detection (None when the detector has none);
+    age: frames since last seen (0: seen this frame); hits: frames seen in total.
+    """
+
+    id: int
+    cls: int
+    points: NDArray[np.float64]
+    query: NDArray[np.float32] | None
+    age: int = 0
+    hits: int = 1
+
+
+def chamfer_matrix_np(a: NDArray[np.floating], b: NDArray[np.floating]) -> NDArray[np.float64]:
+    """Pairwise Chamfer distance between point sets, the project's convention
+    ((mean a->b + mean b->a) / 2).
+
+    a (A, n, 2), b (B, m, 2) -> (A, B) float64. Plain numpy; meant for the small matrices of
+    per-frame association (memory A*B*n*m floats).
+    """
+    a = np.asarray(a, dtype=np.float64)
+    b = np.asarray(b, dtype=np.float64)
+    if a.ndim != 3 or a.shape[2] != 2 or b.ndim != 3 or b.shape[2] != 2:
+        raise ValueError(
+            f"chamfer_matrix_np: expected (A, n, 2) and (B, m, 2), got {a.shape}, {b.shape}"
+        )
+    if a.shape[0] == 0 or b.shape[0] == 0:
+        return np.zeros((a.shape[0], b.shape[0]), np.float64)
+    if a.shape[1] == 0 or b.shape[1] == 0:
+        raise ValueError("chamfer_matrix_np: point sets must not be empty")
+    diff = a[:, None, :, None, :] - b[None, :, None, :, :]  # (A, B, n, m, 2)
+    d = np.sqrt(np.einsum("abnmk,abnmk->abnm", diff, diff))  # (A, B, n, m)
+    return 0.5 * (d.min(axis=3).mean(axis=2) + d.min(axis=2).mean(axis=2))  # (A, B)
+
+
+def positional_affinity(
+    det_points: NDArray[np.floating],
+    det_classes: NDArray[np.integer],
+    trk_points: NDArray[np.floating],
+    trk_classes: NDArray[np.integer],
+    scale: float = DEFAULT_AFFINITY_SCALE,
+) -> NDArray[np.float64]:
+    """Association scores from geometry alone: exp(-chamfer / scale), 0 across classes.
+
+    det_points (k, n, 2), det_classes (k,), trk_points (t, m, 2), trk_classes (t,), all in the same
+    (ego) frame -> (k, t) float64 in [0, 1]. A Chamfer gate of g metres is the score threshold
+    exp(-g / scale).
+    """
+    if not scale > 0:
+        raise ValueError(f"positional_affinity: scale must be > 0, got {scale}")
+    det_classes = np.asarray(det_classes)
+    trk_classes = np.asarray(trk_classes)
+    cd = chamfer_matrix_np(det_points, trk_points)  # (k, t)
+    if cd.shape != (det_classes.shape[0], trk_classes.shape[0]):
+        raise ValueError(
+            f"positional_affinity: {cd.shape[0]} detections / {det_classes.shape[0]} classes, "
+            f"{cd.shape[1]} tracks / {trk_classes.shape[0]} classes"
+        )
+    same = det_classes[:, None] == trk_classes[None, :]  # (k, t)
+    return np.where(same, np.exp(-cd / scale), 0.0)  # (k, t)
+
+
+def match_scores(
+    scores: NDArray[np.floating],
+    det_classes: NDArray[np.integer],
+    trk_classes: NDArray[np.integer],
+    threshold: float,
+) -> NDArray[np.int64]:
+    """One-to-one assignment maximising the summed score over admissible pairs.
+
+    scores (k, t) in [0, 1]; a pair is admissible when score >= threshold and the classes agree.
+    Returns (k,) int64: the matched column of each detection, -1 where unmatched.
+    """
+    scores = np.asarray(scores, dtype=np.float64)
+    det_classes = np.asarray(det_classes, dtype=np.int64)
+    trk_classes = np.asarray(trk_classes, dtype=np.int64)
+    k, t = det_classes.shape[0], trk_classes.shape[0]
+    if scores.shape != (k, t):
+        raise ValueError(
+            f"association scores must be ({k}, {t}) (detections, tracks), got {scores.shape}"
+        )
+    if not np.all(np.isfinite(scores)):
+        raise ValueError("association scores contain NaN or inf")
+    if scores.size and (scores.min() < 0.0 or scores.max() > 1.0):
+        raise ValueError(
+            f"association scores must lie in [0, 1], got [{scores.min()}, {scores.max()}]"
+        )
+    out = np.full(k, -1, np.int64)
+    if k == 0 or t == 0:
+        return out
+    ok = (scores >= threshold) & (det_classes[:, None] == trk_classes[None, :])  # (k, t)
+    # Inadmissible pairs weigh 0: scores are >= 0, so the best full assignment restricted to its
+    # admissible pairs is a best admissible matching (and vice versa).
+    weight = np.where(ok, scores, 0.0)  # (k, t)
+    rows, cols = linear_sum_assignment(weight, maximize=True)
+    keep = ok[rows, cols]
+    out[rows[keep]] = cols[keep]
+    return out
+
+
+class Tracker:
+    """Inference association with a tracking buffer (state lives in the instance, no globals).
+
+    threshold: minimum score θ of an accepted match; max_age: a track unseen for more than this many
+    consecutive frames is dropped (0: tracks live one frame only).
+    """
+
+    def __init__(self, threshold: float = 0.5, max_age: int = 3) -> None:
+        if not 0.0 <= threshold <= 1.0:
+            raise ValueError(f"Tracker: threshold must be in [0, 1], got {threshold}")
+        if max_age < 0:
+            raise ValueError(f"Tracker: max_age must be >= 0, got {max_age}")
+        self.threshold = float(threshold)
+        self.max_age = int(max_age)
+        self._tracks: list[Track] = []
+        self._next_id = 0
+
+    def reset(self) -> None:
+        """Forgets every track and restarts ids at 0 (a new sequence)."""
+        self._tracks = []
+        self._next_id = 0
+
+    @property
+    def tracks(self) -> list[Track]:
+        """The buffer, in the column order of the score matrices (`tracks_in_ego`, `assign`)."""
+        return list(self._tracks)
+
+    def __len__(self) -> int:
+        return len(self._tracks)
+
+    def track(self, track_id: int) -> Track:
+        """The buffer entry of `track_id` (KeyError if not tracked)."""
+        for tr in self._tracks:
+            if tr.id == track_id:
+                return tr
+        raise KeyError(f"track {track_id} is not in the buffer")
+
+    def tracks_in_ego(
+        self, pose: NDArray[np.float64]
+    ) -> tuple[
+        NDArray[np.int64], NDArray[np.int64], NDArray[np.float32], NDArray[np.float32] | None
+    ]:
+        """The buffer seen from the ego pose (4, 4) ego->world, for the association network.
+
+        Returns ids (t,) int64, classes (t,) int64, points (t, n, 2) float32 EGO frame (n = the
+        detections' point count, 20), queries (t, D) float32 or None when any track lacks a query.
+        """
+        t = len(self._tracks)
+        ids = np.array([tr.id for tr in self._tracks], np.int64)  # (t,)
+        classes = np.array([tr.cls for tr in self._tracks], np.int64)  # (t,)
+        if t == 0:
+            return ids, classes, np.zeros((0, 20, 2), np.float32), None
+        pose = np.asarray(pose, dtype=np.float64)
+        pts = np.stack([world_to_ego(tr.points, pose) for tr in self._tracks]).astype(np.float32)
+        if any(tr.query is None for tr in self._tracks):
+            queries = None
+        else:
+            queries = np.stack([tr.query for tr in self._tracks]).astype(np.float32)  # (t, D)
+        return ids, classes, pts, queries  # pts (t, n, 2)
+
+    def assign(
+        self,
+        scores: NDArray[np.floating],
+        det_classes: NDArray[np.integer],
+        det_points: NDArray[np.floating],
+        pose: NDArray[np.float64],
+        det_queries: NDArray[np.floating] | None = None,
+    ) -> NDArray[np.int64]:
+        """Associates one frame's detections with the buffer and updates it.
+
+        scores (k, t) in [0, 1] against `tracks` in order; det_classes (k,); det_points (k, n, 2)
+        EGO frame; pose (4, 4) ego->world; det_queries (k, D) or None. Returns the track id of each
+        detection (k,) int64 (fresh, increasing ids for unmatched detections). Matched tracks take
+        the detection's geometry (world frame) and query; tracks unseen for more than max_age frames
+        are dropped. On bad input nothing changes (ValueError).
+        """
+        det_classes = np.asarray(det_classes, dtype=np.int64)
+        det_points = np.asarray(det_points, dtype=np.float64)
+        pose = np.asarray(pose, dtype=np.float64)
+        k = det_classes.shape[0]
+        if det_points.ndim != 3 or det_points.shape[0] != k or det_points.shape[2] != 2:
+            raise ValueError(
+                f"Tracker.assign: det_points must be ({k}, n, 2), got {det_points.shape}"
+            )
+        if not np.all(np.isfinite(det_points)):
+            raise ValueError("Tracker.assign: det_points contain NaN or inf")
+        if pose.shape != (4, 4) or not np.all(np.isfinite(pose)):
+            raise ValueError(
+                f"Tracker.assign: pose must be a finite (4, 4) matrix, got {pose.shape}"
+            )
+        if det_queries is not None:
+            det_queries = np.asarray(det_queries, dtype=np.float32)
+            if det_queries.ndim != 2 or det_queries.shape[0] != k:
+                raise ValueError(
+                    f"Tracker.assign: det_queries must be ({k}, D), got {det_queries.shape}"
+                )
+        trk_classes = np.array([tr.cls for tr in self._tracks], np.int64)  # (t,)
+        cols = match_scores(scores, det_classes, trk_classes, self.threshold)  # (k,)
+
+        ids = np.empty(k, np.int64)
+        seen: set[int] = set()
+        new_tracks: list[Track] = []
+        for i in range(k):
+            pts_w = ego_to_world(det_points[i], pose)  # (n, 2)
+            q = None if det_queries is None else det_queries[i].copy()
+            if cols[i] >= 0:
+                tr = self._tracks[int(cols[i])]
+                tr.points, tr.query, tr.age = pts_w, q, 0
+                tr.hits += 1
+            else:
+                tr = Track(self._next_id, int(det_classes[i]), pts_w, q)
+                self._next_id += 1
+                new_tracks.append(tr)
+            ids[i] = tr.id
+            seen.add(tr.id)
+        kept = []
+        for tr in self._tracks:
+            if tr.id not in seen:
+                tr.age += 1
+            if tr.age <= self.max_age:
+                kept.append(tr)
+        self._tracks = kept + new_tracks
+        return ids
+
+    def set_points(self, track_id: int, points_world: NDArray[np.floating]) -> None:
+        """Replaces a track's stored geometry (n, 2) WORLD frame, e.g. with the fused result."""
+        pts = np.asarray(points_world, dtype=np.float64)
+        if pts.ndim != 2 or pts.shape[1] != 2 or not np.all(np.isfinite(pts)):
+            raise ValueError(f"Tracker.set_points: need finite (n, 2) points, got {pts.shape}")
+        self.track(track_id).points = pts.copy()
