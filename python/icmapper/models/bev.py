@@ -1,0 +1,193 @@
+"""BEV features from multi-camera image features, and the temporal BEV memory.
+
+``ViewTransformer``: BEVFormer-style spatial cross-attention built on ``grid_sample``. Each BEV
+cell is a pillar of points at a few heights; each point is projected into every camera with its
+intrinsics/extrinsics; the image features sampled there are combined with learned weights over
+(camera, height) (softmax over the valid projections), then projected, with a residual and an FFN.
+
+``TemporalMemory``: the previous BEV warped into the current ego frame by the ego motion and fused
+with the current BEV by a convolutional GRU (StreamMapNet).
+
+BEV layout: (B, C, X, Y) with X = ``bev_x`` cells along ego x (forward, -hx..hx) and Y = ``bev_y``
+cells along ego y (left, -hy..hy); cell centres at ((i + 0.5) / X, (j + 0.5) / Y) of the range.
+"""
+
+from __future__ import annotations
+
+import torch
+import torch.nn.functional as F
+from torch import nn
+
+
+def bev_cell_centres(bev_x: int, bev_y: int, half_x: float, half_y: float) -> torch.Tensor:
+    """Ego-frame (x, y) metres of the BEV cell centres: (X, Y, 2) float32."""
+    xs = (torch.arange(bev_x, dtype=torch.float32) + 0.5) / bev_x * 2 * half_x - half_x  # (X,)
+    ys = (torch.arange(bev_y, dtype=torch.float32) + 0.5) / bev_y * 2 * half_y - half_y  # (Y,)
+    gx, gy = torch.meshgrid(xs, ys, indexing="ij")  # (X, Y)
+    return torch.stack([gx, gy], dim=-1)  # (X, Y, 2)
+
+
+def sample_bev(bev: torch.Tensor, points01: torch.Tensor) -> torch.Tensor:
+    """Bilinear samples of a BEV map at normalised points.
+
+    bev (B, C, X, Y); points01 (B, ..., 2) with (x, y) in [0, 1] of the range -> (B, ..., C);
+    outside points read zeros.
+    """
+    b = bev.shape[0]
+    lead = points01.shape[1:-1]
+    grid = points01.reshape(b, -1, 1, 2).flip(-1) * 2 - 1  # (B, P, 1, 2) as (y -> W, x -> H)
+    out = F.grid_sample(bev, grid, mode="bilinear", padding_mode="zeros", align_corners=False)
+    return out.squeeze(-1).transpose(1, 2).reshape(b, *lead, bev.shape[1])  # (B, ..., C)
+
+
+class ViewTransformer(nn.Module):
+    """Image features -> BEV features by spatial cross-attention at projected pillar points.
+
+    forward(feats (B, N_cam, C_img, h, w), intrinsics (B, N_cam, 3, 3) in pixels of the input image,
+    cam_to_ego (B, N_cam, 4, 4), image_size (H, W)) -> BEV (B, C, X, Y).
+    """
+
+    def __init__(
+        self,
+        img_channels: int,
+        channels: int,
+        bev_x: int,
+        bev_y: int,
+        half_x: float,
+        half_y: float,
+        heights: tuple[float, ...],
+        num_cameras: int,
+    ) -> None:
+        super().__init__()
+        self.bev_x, self.bev_y = bev_x, bev_y
+        self.num_cameras = num_cameras
+        self.num_heights = len(heights)
+        centres = bev_cell_centres(bev_x, bev_y, half_x, half_y).reshape(-1, 2)  # (N, 2)
+        z = torch.tensor(heights, dtype=torch.float32)  # (Z,)
+        pillars = torch.cat(
+            [
+                centres[:, None, :].expand(-1, len(heights), 2),
+                z[None, :, None].expand(centres.shape[0], -1, 1),
+                torch.ones(centres.shape[0], len(heights), 1),
+            ],
+            dim=-1,
+        )  # (N, Z, 4) homogeneous ego points
+        self.register_buffer("pillars", pillars, persistent=False)
+        self.query = nn.Parameter(torch.randn(bev_x * bev_y, channels) * 0.02)  # (N, C)
+        self.value = nn.Linear(img_channels, channels)
+        self.query_logits = nn.Linear(channels, num_cameras * len(heights))
+        self.feat_logits = nn.Linear(channels, 1)
+        self.proj = nn.Linear(channels, channels)
+        self.norm1 = nn.LayerNorm(channels)
+        self.ffn = nn.Sequential(
+            nn.Linear(channels, 2 * channels), nn.ReLU(), nn.Linear(2 * channels, channels)
+        )
+        self.norm2 = nn.LayerNorm(channels)
+
+    def project(
+        self, intrinsics: torch.Tensor, cam_to_ego: torch.Tensor, image_size: tuple[int, int]
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        """Pillar points in every camera.
+
+        Returns grid (B, N_cam, N, Z, 2) in [-1, 1] and valid (B, N_cam, N, Z).
+        """
+        ego_to_cam = torch.linalg.inv(cam_to_ego.float())  # (B, Ncam, 4, 4)
+        p = torch.einsum("bcij,nzj->bcnzi", ego_to_cam, self.pillars)[..., :3]  # (B, Ncam, N, Z, 3)
+        uvw = torch.einsum("bcij,bcnzj->bcnzi", intrinsics.float(), p)  # (B, Ncam, N, Z, 3)
+        depth = uvw[..., 2]  # (B, Ncam, N, Z)
+        uv = uvw[..., :2] / depth.clamp(min=1e-3)[..., None]  # (B, Ncam, N, Z, 2) pixels
+        h, w = image_size
+        grid = torch.stack([uv[..., 0] / w, uv[..., 1] / h], dim=-1) * 2 - 1  # (B, Ncam, N, Z, 2)
+        valid = (depth > 0.1) & (grid.abs() <= 1).all(-1)  # (B, Ncam, N, Z)
+        return grid, valid
+
+    def forward(
+        self,
+        feats: torch.Tensor,
+        intrinsics: torch.Tensor,
+        cam_to_ego: torch.Tensor,
+        image_size: tuple[int, int],
+    ) -> torch.Tensor:
+        b, ncam, c_img, fh, fw = feats.shape
+        if ncam != self.num_cameras:
+            raise ValueError(f"expected {self.num_cameras} cameras, got {ncam}")
+        grid, valid = self.project(intrinsics, cam_to_ego, image_size)
+        n, z = grid.shape[2], grid.shape[3]
+        sampled = F.grid_sample(
+            feats.reshape(b * ncam, c_img, fh, fw),
+            grid.reshape(b * ncam, n, z, 2).to(feats.dtype),
+            mode="bilinear",
+            padding_mode="zeros",
+            align_corners=False,
+        )  # (B*Ncam, C_img, N, Z)
+        sampled = sampled.reshape(b, ncam, c_img, n, z).permute(0, 3, 1, 4, 2)  # (B,N,Ncam,Z,Ci)
+        value = self.value(sampled)  # (B, N, Ncam, Z, C)
+        q = self.query  # (N, C)
+        logits = self.query_logits(q).reshape(1, n, ncam, z) + self.feat_logits(value).squeeze(-1)
+        mask = valid.permute(0, 2, 1, 3)  # (B, N, Ncam, Z)
+        logits = logits.masked_fill(~mask, -1e4).reshape(b, n, ncam * z)  # (B, N, Ncam*Z)
+        weights = torch.softmax(logits.float(), dim=-1).to(value.dtype)
+        weights = weights * mask.reshape(b, n, -1).to(value.dtype)  # cells seen by no camera -> 0
+        agg = torch.einsum("bnk,bnkc->bnc", weights, value.reshape(b, n, ncam * z, -1))  # (B, N, C)
+        x = self.norm1(q[None] + self.proj(agg))  # (B, N, C)
+        x = self.norm2(x + self.ffn(x))  # (B, N, C)
+        return x.transpose(1, 2).reshape(b, -1, self.bev_x, self.bev_y)  # (B, C, X, Y)
+
+
+def warp_bev(
+    prev_bev: torch.Tensor, cur_to_prev: torch.Tensor, half_x: float, half_y: float
+) -> torch.Tensor:
+    """The previous BEV resampled on the current BEV grid.
+
+    prev_bev (B, C, X, Y); cur_to_prev (B, 4, 4) maps current ego coordinates to previous ego
+    coordinates -> (B, C, X, Y) (zeros where the current cell was outside the previous range).
+    """
+    b, _, nx, ny = prev_bev.shape
+    centres = bev_cell_centres(nx, ny, half_x, half_y).to(prev_bev.device)  # (X, Y, 2)
+    r = cur_to_prev[:, :2, :2].to(prev_bev.dtype)  # (B, 2, 2)
+    t = cur_to_prev[:, :2, 3].to(prev_bev.dtype)  # (B, 2)
+    p = torch.einsum("bij,xyj->bxyi", r, centres.to(prev_bev.dtype)) + t[:, None, None]  # (B,X,Y,2)
+    norm = torch.tensor([half_x, half_y], dtype=p.dtype, device=p.device)
+    p01 = (p + norm) / (2 * norm)  # (B, X, Y, 2) in [0, 1]
+    return sample_bev(prev_bev, p01).permute(0, 3, 1, 2)  # (B, C, X, Y)
+
+
+class ConvGRU(nn.Module):
+    """Convolutional GRU cell: forward(x (B, C, X, Y), h (B, C, X, Y)) -> new h (B, C, X, Y)."""
+
+    def __init__(self, channels: int, kernel: int = 3) -> None:
+        super().__init__()
+        pad = kernel // 2
+        self.gates = nn.Conv2d(2 * channels, 2 * channels, kernel, padding=pad)
+        self.cand = nn.Conv2d(2 * channels, channels, kernel, padding=pad)
+
+    def forward(self, x: torch.Tensor, h: torch.Tensor) -> torch.Tensor:
+        zr = torch.sigmoid(self.gates(torch.cat([x, h], dim=1)))  # (B, 2C, X, Y)
+        z, r = zr.chunk(2, dim=1)  # (B, C, X, Y) each
+        cand = torch.tanh(self.cand(torch.cat([x, r * h], dim=1)))  # (B, C, X, Y)
+        return (1 - z) * h + z * cand
+
+
+class TemporalMemory(nn.Module):
+    """Fuses the current BEV with the warped previous BEV.
+
+    forward(bev (B, C, X, Y), prev_bev (B, C, X, Y) or None, cur_to_prev (B, 4, 4) or None)
+    -> fused BEV (B, C, X, Y); without memory the current BEV passes through a norm only.
+    """
+
+    def __init__(self, channels: int, half_x: float, half_y: float) -> None:
+        super().__init__()
+        self.half_x, self.half_y = half_x, half_y
+        self.gru = ConvGRU(channels)
+        self.norm = nn.GroupNorm(1, channels)
+
+    def forward(
+        self,
+        bev: torch.Tensor,
+        prev_bev: torch.Tensor | None,
+        cur_to_prev: torch.Tensor | None,
+    ) -> torch.Tensor:
+        if prev_bev is None or cur_to_prev is None:
+            return self.norm(bev)
+        warped = warp_bev(prev_bev, cur_to_prev, self.half_x, self.half_y)  # (B, C, X, Y)
+        return self.norm(self.gru(bev, warped))

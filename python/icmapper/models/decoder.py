@@ -1,0 +1,145 @@
+"""DETR-style map decoder: queries that each regress a fixed number of points.
+
+Each layer: self-attention among queries; the query samples the BEV at its current points (bilinear)
+and aggregates them with learned per-point weights; an FFN; then a class head (logits per layer) and
+a regression head (shared by all layers or one per layer) that refines the points in inverse-sigmoid
+space. Points are normalised to [0, 1] of the perception range inside the decoder.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import torch
+from torch import nn
+
+from icmapper.models.bev import sample_bev
+
+
+def inverse_sigmoid(x: torch.Tensor, eps: float = 1e-5) -> torch.Tensor:
+    """logit(x) with x clamped to [eps, 1 - eps]."""
+    x = x.clamp(eps, 1 - eps)
+    return torch.log(x / (1 - x))
+
+
+def mlp(c_in: int, c_hidden: int, c_out: int, layers: int = 2) -> nn.Sequential:
+    """A ReLU MLP with ``layers`` linear layers."""
+    mods: list[nn.Module] = []
+    c = c_in
+    for _ in range(layers - 1):
+        mods += [nn.Linear(c, c_hidden), nn.ReLU()]
+        c = c_hidden
+    mods.append(nn.Linear(c, c_out))
+    return nn.Sequential(*mods)
+
+
+@dataclass
+class DecoderOutput:
+    """logits: per layer (B, Q, K); points: per layer (B, Q, P, 2) in [0, 1]; queries (B, Q, C)
+    of the last layer."""
+
+    logits: list[torch.Tensor]
+    points: list[torch.Tensor]
+    queries: torch.Tensor
+
+
+class DecoderLayer(nn.Module):
+    """One decoder layer (self-attention, BEV point sampling, FFN)."""
+
+    def __init__(self, channels: int, num_points: int, heads: int) -> None:
+        super().__init__()
+        self.self_attn = nn.MultiheadAttention(channels, heads, batch_first=True)
+        self.norm1 = nn.LayerNorm(channels)
+        self.point_weights = nn.Linear(channels, num_points)
+        self.value = nn.Linear(channels, channels)
+        self.out = nn.Linear(channels, channels)
+        self.norm2 = nn.LayerNorm(channels)
+        self.ffn = mlp(channels, 2 * channels, channels)
+        self.norm3 = nn.LayerNorm(channels)
+
+    def forward(
+        self, q: torch.Tensor, pos: torch.Tensor, bev: torch.Tensor, points: torch.Tensor
+    ) -> torch.Tensor:
+        """q, pos (B, Q, C); bev (B, C, X, Y); points (B, Q, P, 2) in [0, 1] -> (B, Q, C)."""
+        qp = q + pos
+        q = self.norm1(q + self.self_attn(qp, qp, q, need_weights=False)[0])  # (B, Q, C)
+        feats = self.value(sample_bev(bev, points))  # (B, Q, P, C)
+        w = torch.softmax(self.point_weights(q + pos), dim=-1)  # (B, Q, P)
+        agg = torch.einsum("bqp,bqpc->bqc", w, feats)  # (B, Q, C)
+        q = self.norm2(q + self.out(agg))
+        return self.norm3(q + self.ffn(q))  # (B, Q, C)
+
+
+class MapDecoder(nn.Module):
+    """forward(bev (B, C, X, Y), prop_queries (B, k, C) | None, prop_points (B, k, P, 2) | None)
+    -> DecoderOutput with Q = num_queries queries; propagated queries (and their points, [0, 1])
+    replace the first k learned queries."""
+
+    def __init__(
+        self,
+        channels: int,
+        num_queries: int,
+        num_layers: int,
+        num_points: int = 20,
+        num_classes: int = 3,
+        heads: int = 4,
+        shared_reg: bool = True,
+    ) -> None:
+        super().__init__()
+        self.num_queries, self.num_points, self.num_classes = num_queries, num_points, num_classes
+        self.num_layers_ = num_layers
+        self.query = nn.Parameter(torch.randn(num_queries, channels) * 0.02)  # (Q, C)
+        self.ref = nn.Parameter(torch.randn(num_queries, num_points, 2) * 0.5)  # logits of points
+        self.layers = nn.ModuleList(
+            [DecoderLayer(channels, num_points, heads) for _ in range(num_layers)]
+        )
+        self.point_embed = mlp(num_points * 2, channels, channels)
+        self.cls_heads = nn.ModuleList(
+            [nn.Linear(channels, num_classes) for _ in range(num_layers)]
+        )
+        n_reg = 1 if shared_reg else num_layers
+        self.reg_heads = nn.ModuleList(
+            [mlp(channels, channels, num_points * 2) for _ in range(n_reg)]
+        )
+        for head in self.reg_heads:  # start from the reference points
+            nn.init.zeros_(head[-1].weight)
+            nn.init.zeros_(head[-1].bias)
+        for head in self.cls_heads:  # focal-loss prior: p = 0.01
+            nn.init.constant_(head.bias, -4.595)
+
+    def reg_head(self, layer: int) -> nn.Module:
+        """The regression head of decoder layer ``layer``."""
+        return self.reg_heads[min(layer, len(self.reg_heads) - 1)]
+
+    def refine(self, layer: int, q: torch.Tensor, points: torch.Tensor) -> torch.Tensor:
+        """Points after the regression head of ``layer``.
+
+        q (B, Q, C), points (B, Q, P, 2) in [0, 1] -> (B, Q, P, 2) in [0, 1].
+        """
+        delta = self.reg_head(layer)(q).reshape(*q.shape[:-1], self.num_points, 2)  # (B, Q, P, 2)
+        return torch.sigmoid(inverse_sigmoid(points) + delta)
+
+    def forward(
+        self,
+        bev: torch.Tensor,
+        prop_queries: torch.Tensor | None = None,
+        prop_points: torch.Tensor | None = None,
+    ) -> DecoderOutput:
+        b = bev.shape[0]
+        q = self.query[None].expand(b, -1, -1)  # (B, Q, C)
+        points = torch.sigmoid(self.ref)[None].expand(b, -1, -1, -1)  # (B, Q, P, 2)
+        if prop_queries is not None and prop_points is not None:
+            k = prop_queries.shape[1]
+            if k > self.num_queries:
+                raise ValueError(f"{k} propagated queries exceed {self.num_queries} queries")
+            q = torch.cat([prop_queries, q[:, : self.num_queries - k]], dim=1)  # (B, Q, C)
+            points = torch.cat([prop_points, points[:, : self.num_queries - k]], dim=1)
+        logits, all_points = [], []
+        for i, layer in enumerate(self.layers):
+            pos = self.point_embed(points.flatten(2))  # (B, Q, C)
+            base = points if i == 0 else points.detach()  # refine from the detached reference
+            q = layer(q, pos, bev, base.detach())  # (B, Q, C)
+            points = self.refine(i, q, base)  # (B, Q, P, 2)
+            logits.append(self.cls_heads[i](q))  # (B, Q, K)
+            all_points.append(points)
+        return DecoderOutput(logits, all_points, q)

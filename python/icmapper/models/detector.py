@@ -1,0 +1,192 @@
+"""The map detector (StreamMapNet-style): images + cameras + ego motion -> BEV -> map instances.
+
+The streaming state (previous BEV and the propagated top-k queries) is passed explicitly:
+``out, state = detector(images, intrinsics, cam_to_ego, state, prev_to_cur)``. Nothing is kept on
+the module between calls.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import torch
+from torch import nn
+
+from icmapper.models.backbone import ResNetBackbone
+from icmapper.models.bev import TemporalMemory, ViewTransformer
+from icmapper.models.decoder import MapDecoder
+from icmapper.models.propagation import QueryPropagation, select_topk
+
+
+@dataclass(frozen=True)
+class DetectorSpec:
+    """Hyper-parameters of the detector (built from the training config's [model] table)."""
+
+    half_x: float = 30.0
+    half_y: float = 15.0
+    num_cameras: int = 6
+    backbone_widths: tuple[int, ...] = (16, 32, 64)
+    backbone_depths: tuple[int, ...] = (1, 1, 1)
+    channels: int = 64
+    bev_x: int = 50
+    bev_y: int = 25
+    heights: tuple[float, ...] = (-1.0, 0.0, 1.0, 2.0)
+    num_queries: int = 30
+    num_layers: int = 3
+    num_points: int = 20
+    num_classes: int = 3
+    heads: int = 4
+    shared_reg: bool = True
+    topk: int = 10
+    temporal: bool = True
+    propagate: bool = True
+
+
+@dataclass
+class DetectorState:
+    """Streaming state carried from one frame to the next (batch B).
+
+    bev (B, C, X, Y) fused BEV of the previous frame; queries (B, k, C) and points (B, k, P, 2) in
+    [0, 1] of the previous ego frame: the top-k queries; src_index (B, k) their query slots.
+    """
+
+    bev: torch.Tensor
+    queries: torch.Tensor
+    points: torch.Tensor
+    src_index: torch.Tensor
+
+    def detach(self) -> DetectorState:
+        return DetectorState(
+            self.bev.detach(), self.queries.detach(), self.points.detach(), self.src_index
+        )
+
+
+@dataclass
+class DetectorOutput:
+    """One frame of detections (batch B, Q queries, P points, K classes).
+
+    logits / points: per decoder layer (B, Q, K) / (B, Q, P, 2) in [0, 1]; queries (B, Q, C) of the
+    last layer; bev (B, C, X, Y). When queries were propagated: num_propagated = k (they occupy
+    slots 0..k-1), prop_src (B, k) their slots in the previous frame, trans_points (B, k, P, 2)
+    in [0, 1] the points regressed from the U_MLP output (for L_trans); else k = 0 and None.
+    """
+
+    logits: list[torch.Tensor]
+    points: list[torch.Tensor]
+    queries: torch.Tensor
+    bev: torch.Tensor
+    num_propagated: int = 0
+    prop_src: torch.Tensor | None = None
+    trans_points: torch.Tensor | None = None
+
+    def scores(self) -> torch.Tensor:
+        """(B, Q) max class probability of the last layer."""
+        return self.logits[-1].sigmoid().max(dim=-1).values
+
+    def classes(self) -> torch.Tensor:
+        """(B, Q) arg-max class of the last layer."""
+        return self.logits[-1].argmax(dim=-1)
+
+
+class MapDetector(nn.Module):
+    """Backbone + view transformer + temporal memory + decoder + query propagation."""
+
+    def __init__(self, spec: DetectorSpec) -> None:
+        super().__init__()
+        self.spec = spec
+        s = spec
+        self.backbone = ResNetBackbone(s.backbone_widths, s.backbone_depths, s.channels)
+        self.view = ViewTransformer(
+            s.channels, s.channels, s.bev_x, s.bev_y, s.half_x, s.half_y, s.heights, s.num_cameras
+        )
+        self.memory = TemporalMemory(s.channels, s.half_x, s.half_y)
+        self.decoder = MapDecoder(
+            s.channels,
+            s.num_queries,
+            s.num_layers,
+            s.num_points,
+            s.num_classes,
+            s.heads,
+            s.shared_reg,
+        )
+        self.propagation = QueryPropagation(s.channels, s.half_x, s.half_y)
+        self.register_buffer("pix_mean", torch.tensor([0.45, 0.45, 0.45]).view(1, 3, 1, 1), False)
+        self.register_buffer("pix_std", torch.tensor([0.25, 0.25, 0.25]).view(1, 3, 1, 1), False)
+
+    # --- conversions -----------------------------------------------------------------------
+    def to_metres(self, points01: torch.Tensor) -> torch.Tensor:
+        """[0, 1] points (..., 2) -> ego metres (..., 2)."""
+        half = points01.new_tensor([self.spec.half_x, self.spec.half_y])
+        return (points01 * 2 - 1) * half
+
+    def to_unit(self, points_m: torch.Tensor) -> torch.Tensor:
+        """Ego metres (..., 2) -> [0, 1] of the range (not clamped)."""
+        half = points_m.new_tensor([self.spec.half_x, self.spec.half_y])
+        return (points_m / half + 1) / 2
+
+    # --- stages ----------------------------------------------------------------------------
+    def image_features(self, images: torch.Tensor) -> torch.Tensor:
+        """images (B, N_cam, 3, H, W) uint8 or float in [0, 1] -> (B, N_cam, C, h, w)."""
+        if images.dim() != 5 or images.shape[2] != 3:
+            raise ValueError(f"images must be (B, N_cam, 3, H, W), got {tuple(images.shape)}")
+        b, n = images.shape[:2]
+        x = images.flatten(0, 1)  # (B*N, 3, H, W)
+        x = x.float() / 255.0 if x.dtype == torch.uint8 else x.float()
+        x = (x - self.pix_mean) / self.pix_std
+        f = self.backbone(x)  # (B*N, C, h, w)
+        return f.reshape(b, n, *f.shape[1:])
+
+    def bev_features(
+        self,
+        feats: torch.Tensor,
+        intrinsics: torch.Tensor,
+        cam_to_ego: torch.Tensor,
+        image_size: tuple[int, int],
+        state: DetectorState | None,
+        prev_to_cur: torch.Tensor | None,
+    ) -> torch.Tensor:
+        """BEV (B, C, X, Y) of this frame fused with the warped previous BEV."""
+        bev = self.view(feats, intrinsics, cam_to_ego, image_size)  # (B, C, X, Y)
+        if not self.spec.temporal or state is None or prev_to_cur is None:
+            return self.memory(bev, None, None)
+        cur_to_prev = torch.linalg.inv(prev_to_cur.float())  # (B, 4, 4)
+        return self.memory(bev, state.bev, cur_to_prev)
+
+    def forward(
+        self,
+        images: torch.Tensor,
+        intrinsics: torch.Tensor,
+        cam_to_ego: torch.Tensor,
+        state: DetectorState | None = None,
+        prev_to_cur: torch.Tensor | None = None,
+    ) -> tuple[DetectorOutput, DetectorState]:
+        """One frame.
+
+        images (B, N_cam, 3, H, W) uint8; intrinsics (B, N_cam, 3, 3); cam_to_ego (B, N_cam, 4, 4);
+        state from the previous frame of the same sequences (None at a sequence start);
+        prev_to_cur (B, 4, 4) previous ego -> current ego (= inv(pose_t) @ pose_{t-1}).
+        Returns the detections and the state for the next frame.
+        """
+        if state is not None and prev_to_cur is None:
+            raise ValueError("prev_to_cur is required when a state is given")
+        image_size = (int(images.shape[-2]), int(images.shape[-1]))
+        feats = self.image_features(images)  # (B, N, C, h, w)
+        bev = self.bev_features(feats, intrinsics, cam_to_ego, image_size, state, prev_to_cur)
+        prop_q = prop_p = trans = src = None
+        k = 0
+        if self.spec.propagate and state is not None and prev_to_cur is not None:
+            prop_q, prop_p = self.propagation(state.queries, state.points, prev_to_cur)
+            trans = self.decoder.refine(self.decoder.num_layers_ - 1, prop_q, prop_p)  # (B,k,P,2)
+            src, k = state.src_index, int(state.queries.shape[1])
+        dec = self.decoder(bev, prop_q, prop_p)
+        out = DetectorOutput(dec.logits, dec.points, dec.queries, bev, k, src, trans)
+        return out, self.next_state(out)
+
+    def next_state(self, out: DetectorOutput) -> DetectorState:
+        """State for the next frame: the BEV and the top-k queries (by score) of ``out``."""
+        k = min(self.spec.topk, self.spec.num_queries)
+        idx = select_topk(out.scores().detach(), k)  # (B, k)
+        q = torch.gather(out.queries, 1, idx[..., None].expand(-1, -1, out.queries.shape[-1]))
+        pts = out.points[-1]  # (B, Q, P, 2)
+        p = torch.gather(pts, 1, idx[..., None, None].expand(-1, -1, *pts.shape[2:]))
+        return DetectorState(out.bev, q, p.detach(), idx)
