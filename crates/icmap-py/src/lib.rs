@@ -1,8 +1,23 @@
-//! PyO3 binding of icmap-geom (argument conversion, GIL release, error mapping only).
+//! PyO3 binding of icmap-geom (argument conversion, GIL release, error mapping only): builds the
+//! extension module `icmapper._icmap`. No algorithms live here.
 use pyo3::prelude::*;
+
+mod convert;
+mod errors;
+mod functions;
+mod map;
 
 #[pymodule]
 fn _icmap(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    m.add_class::<map::PyGlobalMap>()?;
+    m.add_function(wrap_pyfunction!(functions::resample, m)?)?;
+    m.add_function(wrap_pyfunction!(functions::resample_spacing, m)?)?;
+    m.add_function(wrap_pyfunction!(functions::clip_to_patch, m)?)?;
+    m.add_function(wrap_pyfunction!(functions::fit_curve, m)?)?;
+    m.add_function(wrap_pyfunction!(functions::merge_polyline, m)?)?;
+    m.add_function(wrap_pyfunction!(functions::polygon_union, m)?)?;
+    m.add_function(wrap_pyfunction!(functions::chamfer_distance, m)?)?;
+    m.add_function(wrap_pyfunction!(functions::chamfer_matrix, m)?)?;
     Ok(())
 }

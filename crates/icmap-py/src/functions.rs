@@ -1,0 +1,158 @@
+//! Module-level geometry functions: convert, release the GIL, call the core, convert back.
+
+use icmap_geom as geom;
+use icmap_geom::Patch;
+use numpy::PyArray2;
+use pyo3::exceptions::PyValueError;
+use pyo3::prelude::*;
+
+use crate::convert::{
+    extents_arg, matrix_to_py, point_sets_arg, points_arg, points_to_py, pose_arg,
+};
+use crate::errors::IntoPyResult;
+
+/// A count argument that must not be negative (the core checks its own lower bound).
+pub fn count_arg(n: i64, name: &str) -> PyResult<usize> {
+    usize::try_from(n).map_err(|_| {
+        PyValueError::new_err(format!("invalid parameter `{name}`: must be >= 0, got {n}"))
+    })
+}
+
+fn list_of_arrays<'py>(
+    py: Python<'py>,
+    parts: &[Vec<geom::Point>],
+) -> Vec<Bound<'py, PyArray2<f64>>> {
+    parts.iter().map(|p| points_to_py(py, p)).collect()
+}
+
+/// Exactly `n` points evenly spaced by arc length (closed: along the contour, first not repeated).
+#[pyfunction]
+#[pyo3(signature = (points, n, closed = false))]
+pub fn resample<'py>(
+    py: Python<'py>,
+    points: &Bound<'py, PyAny>,
+    n: i64,
+    closed: bool,
+) -> PyResult<Bound<'py, PyArray2<f64>>> {
+    let pts = points_arg(points, "points")?;
+    let n = count_arg(n, "n")?;
+    let out = py.detach(|| geom::resample(&pts, n, closed)).py_err()?;
+    Ok(points_to_py(py, &out))
+}
+
+/// Points about `spacing` apart by arc length.
+#[pyfunction]
+#[pyo3(signature = (points, spacing = 1.0, closed = false))]
+pub fn resample_spacing<'py>(
+    py: Python<'py>,
+    points: &Bound<'py, PyAny>,
+    spacing: f64,
+    closed: bool,
+) -> PyResult<Bound<'py, PyArray2<f64>>> {
+    let pts = points_arg(points, "points")?;
+    let out = py
+        .detach(|| geom::resample_spacing(&pts, spacing, closed))
+        .py_err()?;
+    Ok(points_to_py(py, &out))
+}
+
+/// The parts of `points` inside the patch of `pose`, same frame as the input.
+#[pyfunction]
+#[pyo3(signature = (points, pose, half_extents, margin = 0.0, closed = false))]
+pub fn clip_to_patch<'py>(
+    py: Python<'py>,
+    points: &Bound<'py, PyAny>,
+    pose: &Bound<'py, PyAny>,
+    half_extents: &Bound<'py, PyAny>,
+    margin: f64,
+    closed: bool,
+) -> PyResult<Vec<Bound<'py, PyArray2<f64>>>> {
+    let pts = points_arg(points, "points")?;
+    let pose = pose_arg(pose)?;
+    let [hx, hy] = extents_arg(half_extents)?;
+    let patch = Patch::new(pose, hx, hy, margin).py_err()?;
+    let min = if closed { 3 } else { 2 };
+    geom::validate_points(&pts, min, "points").py_err()?;
+    let parts = py.detach(|| {
+        if closed {
+            let ring = geom::clip_polygon(&pts, &patch);
+            if ring.is_empty() {
+                Vec::new()
+            } else {
+                vec![ring]
+            }
+        } else {
+            geom::clip_polyline(&pts, &patch)
+        }
+    });
+    Ok(list_of_arrays(py, &parts))
+}
+
+/// Smoothing cubic spline fit (scipy `splprep(s=s)` semantics), evaluated about `spacing` apart.
+#[pyfunction]
+#[pyo3(signature = (points, s = 0.5, spacing = 1.0))]
+pub fn fit_curve<'py>(
+    py: Python<'py>,
+    points: &Bound<'py, PyAny>,
+    s: f64,
+    spacing: f64,
+) -> PyResult<Bound<'py, PyArray2<f64>>> {
+    let pts = points_arg(points, "points")?;
+    let out = py.detach(|| geom::fit_curve(&pts, s, spacing)).py_err()?;
+    Ok(points_to_py(py, &out))
+}
+
+/// Merges a detected polyline into a global one (Algorithm 2); keeps the global direction.
+#[pyfunction]
+#[pyo3(signature = (global_pts, detected_pts, s = 0.5, spacing = 1.0))]
+pub fn merge_polyline<'py>(
+    py: Python<'py>,
+    global_pts: &Bound<'py, PyAny>,
+    detected_pts: &Bound<'py, PyAny>,
+    s: f64,
+    spacing: f64,
+) -> PyResult<Bound<'py, PyArray2<f64>>> {
+    let g = points_arg(global_pts, "global_pts")?;
+    let d = points_arg(detected_pts, "detected_pts")?;
+    let out = py
+        .detach(|| geom::merge_polyline(&g, &d, s, spacing))
+        .py_err()?;
+    Ok(points_to_py(py, &out))
+}
+
+/// Union of closed rings: outer rings, counter-clockwise, largest area first.
+#[pyfunction]
+pub fn polygon_union<'py>(
+    py: Python<'py>,
+    rings: &Bound<'py, PyAny>,
+) -> PyResult<Vec<Bound<'py, PyArray2<f64>>>> {
+    let rings = point_sets_arg(rings, "rings")?;
+    let out = py.detach(|| geom::polygon_union(&rings)).py_err()?;
+    Ok(list_of_arrays(py, &out))
+}
+
+/// (mean nearest distance a->b + mean nearest distance b->a) / 2.
+#[pyfunction]
+pub fn chamfer_distance(
+    py: Python<'_>,
+    a: &Bound<'_, PyAny>,
+    b: &Bound<'_, PyAny>,
+) -> PyResult<f64> {
+    let a = points_arg(a, "a")?;
+    let b = points_arg(b, "b")?;
+    py.detach(|| geom::chamfer_distance(&a, &b)).py_err()
+}
+
+/// All pairwise Chamfer distances, `(A, B)` float64.
+#[pyfunction]
+pub fn chamfer_matrix<'py>(
+    py: Python<'py>,
+    a: &Bound<'py, PyAny>,
+    b: &Bound<'py, PyAny>,
+) -> PyResult<Bound<'py, PyArray2<f64>>> {
+    let a = point_sets_arg(a, "a")?;
+    let b = point_sets_arg(b, "b")?;
+    let (na, nb) = (a.len(), b.len());
+    let out = py.detach(|| geom::chamfer_matrix(&a, &b)).py_err()?;
+    matrix_to_py(py, out, na, nb)
+}

@@ -1,0 +1,276 @@
+//! `GlobalMap`: the core store behind a `RwLock` in a frozen pyclass, so one map can be shared by
+//! several Python threads; every lock is taken with the GIL released.
+
+use std::path::PathBuf;
+use std::sync::{RwLock, RwLockReadGuard, RwLockWriteGuard};
+
+use icmap_geom as geom;
+use icmap_geom::{MapClass, MapConfig, Patch};
+use numpy::{PyArray1, PyArray2};
+use pyo3::exceptions::{PyKeyError, PyRuntimeError, PyTypeError, PyValueError};
+use pyo3::prelude::*;
+use pyo3::types::{PyDict, PyInt};
+
+use crate::convert::{
+    extents_arg, matrix_to_py, points3_f32_to_py, points_arg, points_to_py, pose_arg, vec_to_py,
+};
+use crate::errors::IntoPyResult;
+use crate::functions::count_arg;
+
+/// The global vector map (world frame): instances with bookkeeping and a spatial index.
+#[pyclass(frozen, module = "icmapper._icmap", name = "GlobalMap")]
+pub struct PyGlobalMap {
+    inner: RwLock<geom::GlobalMap>,
+}
+
+fn poisoned() -> PyErr {
+    PyRuntimeError::new_err("the map's lock was poisoned by an earlier panic; the map is unusable")
+}
+
+/// An instance id argument: a non-negative int; any other int is an unknown id (KeyError).
+fn id_arg(obj: &Bound<'_, PyAny>) -> PyResult<u64> {
+    if let Ok(id) = obj.extract::<u64>() {
+        return Ok(id);
+    }
+    if obj.is_instance_of::<PyInt>() {
+        return Err(PyKeyError::new_err(format!(
+            "no instance with id {obj} in the map"
+        )));
+    }
+    Err(PyTypeError::new_err(format!(
+        "an instance id must be an int, got {}",
+        obj.get_type().name()?
+    )))
+}
+
+fn class_arg(cls: i64) -> PyResult<MapClass> {
+    MapClass::try_from(cls).py_err()
+}
+
+impl PyGlobalMap {
+    fn read(&self) -> PyResult<RwLockReadGuard<'_, geom::GlobalMap>> {
+        self.inner.read().map_err(|_| poisoned())
+    }
+    fn write(&self) -> PyResult<RwLockWriteGuard<'_, geom::GlobalMap>> {
+        self.inner.write().map_err(|_| poisoned())
+    }
+}
+
+#[pymethods]
+impl PyGlobalMap {
+    /// An empty map; `smoothing` is the curve-fit `s` used on merge, `spacing` the stored point
+    /// spacing in metres.
+    #[new]
+    #[pyo3(signature = (smoothing = 0.5, spacing = 1.0))]
+    fn new(smoothing: f64, spacing: f64) -> PyResult<Self> {
+        let map = geom::GlobalMap::new(MapConfig { smoothing, spacing }).py_err()?;
+        Ok(PyGlobalMap {
+            inner: RwLock::new(map),
+        })
+    }
+
+    #[getter]
+    fn smoothing(&self, py: Python<'_>) -> PyResult<f64> {
+        py.detach(|| Ok(self.read()?.config().smoothing))
+    }
+
+    #[getter]
+    fn spacing(&self, py: Python<'_>) -> PyResult<f64> {
+        py.detach(|| Ok(self.read()?.config().spacing))
+    }
+
+    fn __len__(&self, py: Python<'_>) -> PyResult<usize> {
+        py.detach(|| Ok(self.read()?.len()))
+    }
+
+    fn __contains__(&self, py: Python<'_>, id: &Bound<'_, PyAny>) -> PyResult<bool> {
+        let Ok(id) = id.extract::<u64>() else {
+            return Ok(false);
+        };
+        py.detach(|| Ok(self.read()?.get(id).is_some()))
+    }
+
+    fn __repr__(&self, py: Python<'_>) -> PyResult<String> {
+        let (n, cfg) = py.detach(|| {
+            let m = self.read()?;
+            Ok::<_, PyErr>((m.len(), m.config()))
+        })?;
+        Ok(format!(
+            "GlobalMap(len={n}, smoothing={}, spacing={})",
+            cfg.smoothing, cfg.spacing
+        ))
+    }
+
+    /// Inserts a new instance observed at `frame`; returns its id.
+    #[pyo3(signature = (cls, points, frame = 0))]
+    fn insert(
+        &self,
+        py: Python<'_>,
+        cls: i64,
+        points: &Bound<'_, PyAny>,
+        frame: i64,
+    ) -> PyResult<u64> {
+        let class = class_arg(cls)?;
+        let pts = points_arg(points, "points")?;
+        py.detach(|| self.write()?.insert(class, &pts, frame).py_err())
+    }
+
+    /// Inserts with a caller-chosen id (ValueError if the id exists).
+    #[pyo3(signature = (id, cls, points, frame = 0))]
+    fn insert_with_id(
+        &self,
+        py: Python<'_>,
+        id: &Bound<'_, PyAny>,
+        cls: i64,
+        points: &Bound<'_, PyAny>,
+        frame: i64,
+    ) -> PyResult<()> {
+        let id: u64 = id.extract().map_err(|_| {
+            PyValueError::new_err(format!(
+                "id must be a non-negative integer below 2**64, got {id}"
+            ))
+        })?;
+        let class = class_arg(cls)?;
+        let pts = points_arg(points, "points")?;
+        py.detach(|| {
+            self.write()?
+                .insert_with_id(id, class, &pts, frame)
+                .py_err()
+        })
+    }
+
+    /// Merges a detection (world frame) into instance `id` by its class rule.
+    #[pyo3(signature = (id, points, frame = 0))]
+    fn merge(
+        &self,
+        py: Python<'_>,
+        id: &Bound<'_, PyAny>,
+        points: &Bound<'_, PyAny>,
+        frame: i64,
+    ) -> PyResult<()> {
+        let id = id_arg(id)?;
+        let pts = points_arg(points, "points")?;
+        py.detach(|| self.write()?.merge(id, &pts, frame).py_err())
+    }
+
+    /// Removes instance `id` (KeyError if absent).
+    fn remove(&self, py: Python<'_>, id: &Bound<'_, PyAny>) -> PyResult<()> {
+        let id = id_arg(id)?;
+        py.detach(|| self.write()?.remove(id).py_err().map(|_| ()))
+    }
+
+    /// `(cls, points (n, 2) float64)` of instance `id` (KeyError if absent).
+    fn get<'py>(
+        &self,
+        py: Python<'py>,
+        id: &Bound<'py, PyAny>,
+    ) -> PyResult<(i64, Bound<'py, PyArray2<f64>>)> {
+        let id = id_arg(id)?;
+        let (cls, pts) = py.detach(|| {
+            let m = self.read()?;
+            let inst = m.get(id).ok_or(geom::GeomError::UnknownId(id)).py_err()?;
+            Ok::<_, PyErr>((i64::from(inst.class.index()), inst.points.clone()))
+        })?;
+        Ok((cls, points_to_py(py, &pts)))
+    }
+
+    /// Bookkeeping of instance `id`: dict(id, cls, closed, first_frame, last_frame, observations,
+    /// n_points).
+    fn info<'py>(&self, py: Python<'py>, id: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyDict>> {
+        let id = id_arg(id)?;
+        let inst = py.detach(|| {
+            let m = self.read()?;
+            let inst = m.get(id).ok_or(geom::GeomError::UnknownId(id)).py_err()?;
+            Ok::<_, PyErr>((
+                inst.id,
+                i64::from(inst.class.index()),
+                inst.closed,
+                inst.first_frame,
+                inst.last_frame,
+                inst.observations,
+                inst.points.len(),
+            ))
+        })?;
+        let d = PyDict::new(py);
+        d.set_item("id", inst.0)?;
+        d.set_item("cls", inst.1)?;
+        d.set_item("closed", inst.2)?;
+        d.set_item("first_frame", inst.3)?;
+        d.set_item("last_frame", inst.4)?;
+        d.set_item("observations", inst.5)?;
+        d.set_item("n_points", inst.6)?;
+        Ok(d)
+    }
+
+    /// All ids, ascending, `(k,)` uint64.
+    fn ids<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray1<u64>>> {
+        let ids =
+            py.detach(|| Ok::<_, PyErr>(self.read()?.instances().iter().map(|i| i.id).collect()))?;
+        Ok(vec_to_py(py, ids))
+    }
+
+    /// Ids (ascending, `(k,)` uint64) of the instances intersecting the patch of `pose`.
+    #[pyo3(signature = (pose, half_extents, margin = 0.0))]
+    fn query<'py>(
+        &self,
+        py: Python<'py>,
+        pose: &Bound<'py, PyAny>,
+        half_extents: &Bound<'py, PyAny>,
+        margin: f64,
+    ) -> PyResult<Bound<'py, PyArray1<u64>>> {
+        let pose = pose_arg(pose)?;
+        let [hx, hy] = extents_arg(half_extents)?;
+        let patch = Patch::new(pose, hx, hy, margin).py_err()?;
+        let ids = py.detach(|| Ok::<_, PyErr>(self.read()?.query(&patch)))?;
+        Ok(vec_to_py(py, ids))
+    }
+
+    /// Every instance in the (expanded) patch clipped and sampled to `n_points` in the ego frame:
+    /// `(ids (k,) uint64, cls (k,) int64, pts (k, n_points, 2) float32, mask (k, n_points) bool)`.
+    #[pyo3(signature = (pose, half_extents, margin = 20.0, n_points = 20))]
+    #[allow(clippy::type_complexity)]
+    fn sample_patch<'py>(
+        &self,
+        py: Python<'py>,
+        pose: &Bound<'py, PyAny>,
+        half_extents: &Bound<'py, PyAny>,
+        margin: f64,
+        n_points: i64,
+    ) -> PyResult<(
+        Bound<'py, PyArray1<u64>>,
+        Bound<'py, PyArray1<i64>>,
+        Bound<'py, numpy::PyArray3<f32>>,
+        Bound<'py, PyArray2<bool>>,
+    )> {
+        let pose = pose_arg(pose)?;
+        let [hx, hy] = extents_arg(half_extents)?;
+        let patch = Patch::new(pose, hx, hy, margin).py_err()?;
+        let n = count_arg(n_points, "n_points")?;
+        let s = py.detach(|| self.read()?.sample_patch(&patch, n).py_err())?;
+        let k = s.ids.len();
+        let cls: Vec<i64> = s.classes.iter().map(|c| i64::from(c.index())).collect();
+        let pts = points3_f32_to_py(py, &s.points, k, s.n_points)?;
+        let mask = matrix_to_py(py, s.mask, k, s.n_points)?;
+        Ok((vec_to_py(py, s.ids), vec_to_py(py, cls), pts, mask))
+    }
+
+    /// Writes the map file atomically (`str` or `os.PathLike`).
+    fn save(&self, py: Python<'_>, path: PathBuf) -> PyResult<()> {
+        py.detach(|| geom::persist::save(&*self.read()?, &path).py_err())
+    }
+
+    /// Reads a map file (ValueError naming the file if it is not a valid map file, OSError if it
+    /// cannot be read).
+    #[staticmethod]
+    fn load(py: Python<'_>, path: PathBuf) -> PyResult<Self> {
+        let map = py.detach(|| geom::persist::load(&path)).py_err()?;
+        Ok(PyGlobalMap {
+            inner: RwLock::new(map),
+        })
+    }
+
+    /// Writes the map as a GeoJSON FeatureCollection (atomically).
+    fn to_geojson(&self, py: Python<'_>, path: PathBuf) -> PyResult<()> {
+        py.detach(|| geom::geojson::write_geojson(&*self.read()?, &path).py_err())
+    }
+}
