@@ -1,0 +1,494 @@
+"""nuScenes reader (plain JSON, no devkit): official tables + map expansion -> Sequences with
+keyframe poses at 2 Hz, the real camera calibration and synthetic images rendered over the map.
+
+Layout (the dataset's own):
+    <dataroot>/<version>/{scene,sample,sample_data,ego_pose,calibrated_sensor,sensor,log}.json
+    <dataroot>/maps/expansion/<location>.json     (node, line, polygon, lane_divider,
+                                                   road_divider, ped_crossing, road_segment, lane)
+
+Class extraction follows StreamMapNet: dividers = lane_divider + road_divider lines; crossings =
+ped_crossing polygons with touching/overlapping pieces unioned; boundaries = contours of the union
+of road_segment and lane polygons. Each scene's world holds the map elements whose bounding box
+comes within `WORLD_MARGIN` m of the scene's poses. nuScenes has no instance identity: its
+sequences have source "nuscenes" and `gt.sequence_gt` derives GT ids by matching. The lane graph
+is not read (arcline paths): nuScenes worlds have no lanes, so no synthetic drives on them.
+
+A split file is JSON `{"train": [scene names], "val": [...], ...}` (other list-valued keys allowed,
+non-list keys such as "source" ignored), e.g. ../shared/data/splits/nuscenes_newsplit.json.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+from icmapper.data.errors import DataError
+from icmapper.data.extract import LazyRenderer, dedup_points, planar, se3, union_contours
+from icmapper.data.types import CameraRig, MapClass, MapInstance, Sequence, WorldMap
+
+TABLES = ("scene", "sample", "sample_data", "ego_pose", "calibrated_sensor", "sensor", "log")
+#: The six cameras in StreamMapNet's order.
+NUSCENES_CAMERAS: tuple[str, ...] = (
+    "CAM_FRONT",
+    "CAM_FRONT_RIGHT",
+    "CAM_FRONT_LEFT",
+    "CAM_BACK",
+    "CAM_BACK_LEFT",
+    "CAM_BACK_RIGHT",
+)
+POSE_CHANNELS = ("LIDAR_TOP", "CAM_FRONT")
+NATIVE_IMAGE_SIZE = (900, 1600)
+#: Map elements within this distance (m, bounding boxes) of a scene's poses form its world.
+WORLD_MARGIN = 100.0
+ID_CLASS_OFFSET = 10**10
+
+
+def _read_json(path: Path) -> object:
+    if not path.is_file():
+        raise DataError(f"file not found: {path}")
+    try:
+        with open(path) as f:
+            return json.load(f)
+    except json.JSONDecodeError as e:
+        raise DataError(f"malformed JSON {path}: {e}") from None
+
+
+def _load_tables(dataroot: Path, version: str) -> dict[str, dict[str, dict]]:
+    root = dataroot / version
+    if not root.is_dir():
+        raise DataError(f"nuScenes tables folder not found: {root}")
+    tables: dict[str, dict[str, dict]] = {}
+    for name in TABLES:
+        path = root / f"{name}.json"
+        rows = _read_json(path)
+        if not isinstance(rows, list) or not all(
+            isinstance(r, dict) and "token" in r for r in rows
+        ):
+            raise DataError(f"{path} must be a JSON list of records with a 'token'")
+        tables[name] = {r["token"]: r for r in rows}
+    return tables
+
+
+def read_split(split_file: str | Path, split: str) -> list[str]:
+    """Scene names of `split` in a split file `{"train": [...], "val": [...]}`."""
+    path = Path(split_file)
+    data = _read_json(path)
+    if not isinstance(data, dict):
+        raise DataError(f"split file {path} must be a JSON object of lists")
+    names = sorted(k for k, v in data.items() if isinstance(v, list))
+    if split not in names:
+        raise DataError(f"unknown split {split!r} in {path}; available: {names}")
+    return [str(s) for s in data[split]]
+
+
+class _MapLayers:
+    """Geometry of one map expansion file: nodes, lines and polygons by token."""
+
+    def __init__(self, path: Path):
+        data = _read_json(path)
+        if not isinstance(data, dict):
+            raise DataError(f"map file {path} is not a JSON object")
+        for layer in (
+            "node",
+            "line",
+            "polygon",
+            "lane_divider",
+            "road_divider",
+            "ped_crossing",
+            "road_segment",
+            "lane",
+        ):
+            if not isinstance(data.get(layer), list):
+                raise DataError(f"map file {path} lacks the layer {layer!r}")
+        self.path = path
+        self.data = data
+        self.nodes = {n["token"]: (float(n["x"]), float(n["y"])) for n in data["node"]}
+        self.lines = {ln["token"]: ln["node_tokens"] for ln in data["line"]}
+        self.polygons = {p["token"]: p["exterior_node_tokens"] for p in data["polygon"]}
+
+    def _pts(self, tokens: list[str], what: str) -> NDArray[np.float64]:
+        try:
+            return dedup_points(np.array([self.nodes[t] for t in tokens], dtype=np.float64))
+        except KeyError as e:
+            raise DataError(f"{self.path}: {what} refers to the unknown node {e}") from None
+
+    def line(self, token: str, what: str) -> NDArray[np.float64]:
+        if token not in self.lines:
+            raise DataError(f"{self.path}: {what} refers to the unknown line {token!r}")
+        return self._pts(self.lines[token], what)
+
+    def polygon(self, token: str, what: str) -> NDArray[np.float64]:
+        if token not in self.polygons:
+            raise DataError(f"{self.path}: {what} refers to the unknown polygon {token!r}")
+        ring = self._pts(self.polygons[token], what)
+        if len(ring) > 1 and np.allclose(ring[0], ring[-1]):
+            ring = ring[:-1]
+        return ring
+
+
+def _near(points: NDArray[np.float64], lo: NDArray[np.float64], hi: NDArray[np.float64]) -> bool:
+    return bool(np.all(points.max(axis=0) >= lo) and np.all(points.min(axis=0) <= hi))
+
+
+def _scene_world(layers: _MapLayers, name: str, poses: NDArray[np.float64]) -> WorldMap:
+    lo = poses[:, :2, 3].min(axis=0) - WORLD_MARGIN
+    hi = poses[:, :2, 3].max(axis=0) + WORLD_MARGIN
+    d = layers.data
+    instances: list[MapInstance] = []
+    crossings = [
+        layers.polygon(r["polygon_token"], f"ped_crossing {r['token']}") for r in d["ped_crossing"]
+    ]
+    crossings = [c for c in crossings if len(c) >= 3 and _near(c, lo, hi)]
+    if crossings:
+        from icmapper import geom
+
+        for k, ring in enumerate(geom.polygon_union(crossings)):
+            instances.append(
+                MapInstance(
+                    k, MapClass.PED_CROSSING, np.asarray(ring, dtype=np.float64), True, "zebra"
+                )
+            )
+    k = 0
+    for layer, style in (("lane_divider", "dashed_white"), ("road_divider", "double_yellow")):
+        for r in d[layer]:
+            pts = layers.line(r["line_token"], f"{layer} {r['token']}")
+            if len(pts) >= 2 and _near(pts, lo, hi):
+                instances.append(
+                    MapInstance(ID_CLASS_OFFSET + k, MapClass.DIVIDER, pts, False, style)
+                )
+                k += 1
+    drivable = []
+    for layer in ("road_segment", "lane"):
+        for r in d[layer]:
+            ring = layers.polygon(r["polygon_token"], f"{layer} {r['token']}")
+            if len(ring) >= 3 and _near(ring, lo, hi):
+                drivable.append(ring)
+    for k, contour in enumerate(union_contours(drivable)):
+        instances.append(
+            MapInstance(2 * ID_CLASS_OFFSET + k, MapClass.BOUNDARY, contour, False, "curb")
+        )
+    return WorldMap(name, instances, drivable, {})
+
+
+def load_nuscenes(
+    dataroot: str | Path,
+    version: str = "v1.0-trainval",
+    split_file: str | Path | None = None,
+    split: str | None = None,
+    image_size: tuple[int, int] = (128, 352),
+    render: bool = True,
+    seed: int = 0,
+) -> list[Sequence]:
+    """The scenes of a nuScenes dataroot as Sequences (sorted by scene name).
+
+    `split_file` + `split` select scenes by name (scenes of the split absent from the dataroot
+    are skipped; none present is an error). Keyframe poses are the ego poses of each sample's
+    LIDAR_TOP (else CAM_FRONT) sample_data, made planar; timestamps in seconds. The rig is the
+    calibration of the six cameras in the scene's first sample, intrinsics scaled to
+    `image_size` (H, W); images are rendered synthetically over the map (`render=True`).
+    """
+    root = Path(dataroot)
+    if not root.is_dir():
+        raise DataError(f"nuScenes dataroot not found: {root}")
+    if (split is None) != (split_file is None):
+        raise ValueError("give both split_file and split, or neither")
+    tables = _load_tables(root, version)
+    scenes = sorted(tables["scene"].values(), key=lambda s: str(s.get("name", s["token"])))
+    if split is not None and split_file is not None:
+        wanted = set(read_split(split_file, split))
+        scenes = [s for s in scenes if s.get("name") in wanted]
+        if not scenes:
+            raise DataError(f"no scene of split {split!r} ({split_file}) is in {root / version}")
+
+    channel_of = {}
+    for cs in tables["calibrated_sensor"].values():
+        sensor = tables["sensor"].get(cs.get("sensor_token", ""))
+        if sensor is None:
+            raise DataError(f"calibrated_sensor {cs['token']} refers to an unknown sensor")
+        channel_of[cs["token"]] = sensor["channel"]
+    by_sample: dict[str, dict[str, dict]] = {}
+    for sd in tables["sample_data"].values():
+        if not sd.get("is_key_frame", True):
+            continue
+        ch = channel_of.get(sd.get("calibrated_sensor_token", ""))
+        if ch is None:
+            raise DataError(f"sample_data {sd['token']} refers to an unknown calibrated_sensor")
+        by_sample.setdefault(sd["sample_token"], {})[ch] = sd
+
+    maps: dict[str, _MapLayers] = {}
+    out = []
+    for scene in scenes:
+        name = str(scene.get("name", scene["token"]))
+        samples = []
+        tok = scene.get("first_sample_token", "")
+        while tok:
+            s = tables["sample"].get(tok)
+            if s is None:
+                raise DataError(f"scene {name}: unknown sample {tok!r}")
+            samples.append(s)
+            tok = s.get("next", "")
+            if len(samples) > len(tables["sample"]):
+                raise DataError(f"scene {name}: the sample chain loops")
+        if not samples:
+            raise DataError(f"scene {name} has no samples")
+        poses = np.empty((len(samples), 4, 4))
+        for i, s in enumerate(samples):
+            sds = by_sample.get(s["token"], {})
+            sd = next((sds[c] for c in POSE_CHANNELS if c in sds), None)
+            if sd is None:
+                raise DataError(f"scene {name}: sample {s['token']} has no {POSE_CHANNELS} data")
+            ep = tables["ego_pose"].get(sd.get("ego_pose_token", ""))
+            if ep is None:
+                raise DataError(f"scene {name}: sample_data {sd['token']} has no ego_pose")
+            poses[i] = planar(
+                se3(np.asarray(ep["rotation"], float), np.asarray(ep["translation"], float))
+            )
+        timestamps = np.array([s["timestamp"] for s in samples], dtype=np.float64) * 1e-6
+        rig = _rig(tables, by_sample.get(samples[0]["token"], {}), name, image_size)
+        log = tables["log"].get(scene.get("log_token", ""))
+        if log is None:
+            raise DataError(f"scene {name} refers to an unknown log")
+        location = str(log["location"])
+        if location not in maps:
+            maps[location] = _MapLayers(root / "maps" / "expansion" / f"{location}.json")
+        world = _scene_world(maps[location], name, poses)
+        renderer = LazyRenderer(world, rig, poses, seed) if render else None
+        out.append(Sequence(name, "nuscenes", world, timestamps, poses, rig, renderer))
+    return out
+
+
+def _rig(tables: dict, sds: dict[str, dict], scene: str, image_size: tuple[int, int]) -> CameraRig:
+    h, w = image_size
+    ks, ts = [], []
+    for cam in NUSCENES_CAMERAS:
+        if cam not in sds:
+            raise DataError(f"scene {scene}: the first sample has no {cam} sample_data")
+        sd = sds[cam]
+        cs = tables["calibrated_sensor"][sd["calibrated_sensor_token"]]
+        k = np.asarray(cs.get("camera_intrinsic"), dtype=np.float64)
+        if k.shape != (3, 3):
+            raise DataError(f"calibrated_sensor {cs['token']}: camera_intrinsic must be 3x3")
+        nh = int(sd.get("height") or NATIVE_IMAGE_SIZE[0])
+        nw = int(sd.get("width") or NATIVE_IMAGE_SIZE[1])
+        k = k.copy()
+        k[0] *= w / nw
+        k[1] *= h / nh
+        ks.append(k)
+        ts.append(se3(np.asarray(cs["rotation"], float), np.asarray(cs["translation"], float)))
+    return CameraRig(NUSCENES_CAMERAS, np.stack(ks), np.stack(ts), (h, w))
+
+
+def _quat_yaw(yaw: float) -> list[float]:
+    return [float(np.cos(yaw / 2)), 0.0, 0.0, float(np.sin(yaw / 2))]
+
+
+def write_fixture(
+    dataroot: str | Path,
+    version: str = "v1.0-mini",
+    scene_lengths: tuple[int, ...] = (6, 5, 4),
+    location: str = "test-town",
+) -> Path:
+    """Writes a tiny nuScenes-format dataset for tests and demos; returns `dataroot`.
+
+    Map: a straight 14 m wide road along x in [0, 400] (two road_segment polygons + two lane
+    polygons), a road divider at y = 0, lane dividers at y = +-3.5, a crossing at x = 100 made of
+    two touching pieces and one at x = 250. Scene k ("scene-000<k+1>") drives along +x at 5 m per
+    keyframe (10 m/s, 2 Hz) from x = 20 + 60 k, with LIDAR_TOP and the six cameras per sample.
+    """
+    root = Path(dataroot)
+    tdir = root / version
+    tdir.mkdir(parents=True, exist_ok=True)
+    (root / "maps" / "expansion").mkdir(parents=True, exist_ok=True)
+
+    nodes, lines, polygons = [], [], []
+
+    def node(x: float, y: float) -> str:
+        tok = f"n{len(nodes)}"
+        nodes.append({"token": tok, "x": x, "y": y})
+        return tok
+
+    def line(pts: list[tuple[float, float]]) -> str:
+        tok = f"l{len(lines)}"
+        lines.append({"token": tok, "node_tokens": [node(*p) for p in pts]})
+        return tok
+
+    def poly(pts: list[tuple[float, float]]) -> str:
+        tok = f"p{len(polygons)}"
+        polygons.append(
+            {"token": tok, "exterior_node_tokens": [node(*p) for p in pts], "holes": []}
+        )
+        return tok
+
+    def rect(x0: float, x1: float, y0: float, y1: float) -> str:
+        return poly([(x0, y0), (x1, y0), (x1, y1), (x0, y1)])
+
+    road = [
+        {
+            "token": f"rs{i}",
+            "polygon_token": rect(x0, x1, -7, 7),
+            "is_intersection": False,
+            "drivable_area_token": "",
+        }
+        for i, (x0, x1) in enumerate(((0, 200), (200, 400)))
+    ]
+    lanes = [
+        {"token": f"ln{i}", "polygon_token": rect(0, 400, y0, y1), "lane_type": "CAR"}
+        for i, (y0, y1) in enumerate(((-7, 0), (0, 7)))
+    ]
+    xs = [float(x) for x in np.linspace(0, 400, 41)]
+    map_json = {
+        "version": "1.3",
+        "node": nodes,
+        "line": lines,
+        "polygon": polygons,
+        "road_segment": road,
+        "lane": lanes,
+        "road_divider": [
+            {
+                "token": "rd0",
+                "line_token": line([(x, 0.0) for x in xs]),
+                "road_segment_token": "rs0",
+            }
+        ],
+        "lane_divider": [
+            {
+                "token": f"ld{i}",
+                "line_token": line([(x, y) for x in xs]),
+                "lane_divider_segments": [],
+            }
+            for i, y in enumerate((-3.5, 3.5))
+        ],
+        "ped_crossing": [
+            {"token": f"pc{i}", "polygon_token": rect(x0, x1, y0, y1), "road_segment_token": "rs0"}
+            for i, (x0, x1, y0, y1) in enumerate(
+                ((100, 104, -7, 0.5), (100, 104, 0.5, 7), (250, 254, -7, 7))
+            )
+        ],
+        "drivable_area": [],
+        "walkway": [],
+        "stop_line": [],
+        "carpark_area": [],
+        "road_block": [],
+        "traffic_light": [],
+        "canvas_edge": {},
+        "connectivity": {},
+        "arcline_path_3": {},
+    }
+
+    sensors = [{"token": "s_lidar", "channel": "LIDAR_TOP", "modality": "lidar"}]
+    cal = [
+        {
+            "token": "c_lidar",
+            "sensor_token": "s_lidar",
+            "translation": [0.9, 0.0, 1.8],
+            "rotation": [1.0, 0.0, 0.0, 0.0],
+            "camera_intrinsic": [],
+        }
+    ]
+    cam_yaw = dict(zip(NUSCENES_CAMERAS, (0.0, -0.96, 0.96, np.pi, 1.9, -1.9), strict=True))
+    for cam, yaw in cam_yaw.items():
+        sensors.append({"token": f"s_{cam}", "channel": cam, "modality": "camera"})
+        # camera frame (x right, y down, z forward) -> ego, looking along `yaw`.
+        r = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
+        c, s = np.cos(yaw), np.sin(yaw)
+        r = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]) @ r
+        w = np.sqrt(max(1e-12, 1 + np.trace(r))) / 2
+        q = [
+            w,
+            (r[2, 1] - r[1, 2]) / (4 * w),
+            (r[0, 2] - r[2, 0]) / (4 * w),
+            (r[1, 0] - r[0, 1]) / (4 * w),
+        ]
+        cal.append(
+            {
+                "token": f"c_{cam}",
+                "sensor_token": f"s_{cam}",
+                "translation": [1.0, 0.0, 1.5],
+                "rotation": q,
+                "camera_intrinsic": [[1266.4, 0.0, 816.3], [0.0, 1266.4, 491.5], [0.0, 0.0, 1.0]],
+            }
+        )
+
+    logs = [
+        {
+            "token": "log0",
+            "logfile": "fixture",
+            "vehicle": "v",
+            "date_captured": "2024-01-01",
+            "location": location,
+        }
+    ]
+    scenes, samples, sample_data, ego_poses = [], [], [], []
+    t0 = 1_600_000_000_000_000
+    for k, n in enumerate(scene_lengths):
+        toks = [f"smp{k}_{i}" for i in range(n)]
+        scenes.append(
+            {
+                "token": f"scn{k}",
+                "log_token": "log0",
+                "nbr_samples": n,
+                "first_sample_token": toks[0] if n else "",
+                "last_sample_token": toks[-1] if n else "",
+                "name": f"scene-{k + 1:04d}",
+                "description": "fixture",
+            }
+        )
+        for i, tok in enumerate(toks):
+            ts = t0 + k * 100_000_000 + i * 500_000
+            samples.append(
+                {
+                    "token": tok,
+                    "timestamp": ts,
+                    "scene_token": f"scn{k}",
+                    "prev": toks[i - 1] if i else "",
+                    "next": toks[i + 1] if i + 1 < n else "",
+                }
+            )
+            ep = f"ep{k}_{i}"
+            ego_poses.append(
+                {
+                    "token": ep,
+                    "timestamp": ts,
+                    "rotation": _quat_yaw(0.0),
+                    "translation": [20.0 + 60.0 * k + 5.0 * i, -1.75, 0.0],
+                }
+            )
+            for cs in cal:
+                ch = cs["sensor_token"][2:]
+                sample_data.append(
+                    {
+                        "token": f"sd{k}_{i}_{ch}",
+                        "sample_token": tok,
+                        "ego_pose_token": ep,
+                        "calibrated_sensor_token": cs["token"],
+                        "timestamp": ts,
+                        "fileformat": "jpg" if ch.startswith("CAM") else "pcd",
+                        "is_key_frame": True,
+                        "height": 900 if ch.startswith("CAM") else 0,
+                        "width": 1600 if ch.startswith("CAM") else 0,
+                        "filename": f"samples/{ch}/{tok}.jpg",
+                        "prev": "",
+                        "next": "",
+                    }
+                )
+
+    def dump(path: Path, obj: object) -> None:
+        tmp = path.with_suffix(".tmp")
+        tmp.write_text(json.dumps(obj))
+        tmp.replace(path)
+
+    for name, rows in (
+        ("scene", scenes),
+        ("sample", samples),
+        ("sample_data", sample_data),
+        ("ego_pose", ego_poses),
+        ("calibrated_sensor", cal),
+        ("sensor", sensors),
+        ("log", logs),
+    ):
+        dump(tdir / f"{name}.json", rows)
+    dump(root / "maps" / "expansion" / f"{location}.json", map_json)
+    return root
