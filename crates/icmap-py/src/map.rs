@@ -87,7 +87,7 @@ impl PyGlobalMap {
         let Ok(id) = id.extract::<u64>() else {
             return Ok(false);
         };
-        py.detach(|| Ok(self.read()?.get(id).is_some()))
+        py.detach(|| Ok(self.read()?.contains(id)))
     }
 
     fn __repr__(&self, py: Python<'_>) -> PyResult<String> {
@@ -204,8 +204,7 @@ impl PyGlobalMap {
 
     /// All ids, ascending, `(k,)` uint64.
     fn ids<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray1<u64>>> {
-        let ids =
-            py.detach(|| Ok::<_, PyErr>(self.read()?.instances().iter().map(|i| i.id).collect()))?;
+        let ids = py.detach(|| Ok::<_, PyErr>(self.read()?.ids()))?;
         Ok(vec_to_py(py, ids))
     }
 

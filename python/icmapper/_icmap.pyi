@@ -1,0 +1,189 @@
+"""Typed stub of the native extension ``icmapper._icmap`` (Rust crate ``icmap-py``).
+
+Conventions: metres and radians; points are ``(n, 2)`` array-likes of a real dtype (float64 and
+float32 arrays are read without conversion, integer arrays and nested sequences are converted);
+results are float64 unless stated. A ``pose`` is ``(x, y, yaw)`` ego -> world, ``half_extents`` is
+``(hx, hy)`` along the ego x / y axes. Classes: 0 ped_crossing (closed ring, first point not
+repeated), 1 divider, 2 boundary (open polylines).
+
+Errors: ``ValueError`` for bad values (NaN/inf, too few points, degenerate geometry, bad
+parameters, unknown class, wrong shapes, duplicate id, corrupt map file), ``TypeError`` for wrong
+types/dtypes (complex, object, str), ``KeyError`` for an unknown instance id, ``OSError`` (with the
+path as ``filename``; ``FileNotFoundError`` for a missing file) for I/O failures. Heavy work runs
+with the GIL released.
+"""
+
+import os
+from collections.abc import Sequence
+from typing import Any, TypedDict
+
+import numpy as np
+import numpy.typing as npt
+
+__version__: str
+
+ArrayLike2 = npt.ArrayLike  # (n, 2) real coordinates
+Pose = Sequence[float] | npt.NDArray[np.floating[Any]]  # (x, y, yaw)
+Extents = Sequence[float] | npt.NDArray[np.floating[Any]]  # (hx, hy)
+F64 = npt.NDArray[np.float64]
+PathArg = str | os.PathLike[str]
+
+def resample(points: ArrayLike2, n: int, closed: bool = False) -> F64:
+    """Exactly ``n`` points evenly spaced by arc length.
+
+    points: (m, 2), m >= 2. Open: first and last point kept, ``n >= 2``. Closed: ``n >= 3`` points
+    along the contour including the closing edge, starting at the first point, not repeated.
+    Returns (n, 2) float64. ValueError on NaN/inf, fewer than 2 points, zero length or bad ``n``.
+    """
+
+def resample_spacing(points: ArrayLike2, spacing: float = 1.0, closed: bool = False) -> F64:
+    """Points about ``spacing`` metres apart by arc length.
+
+    points: (m, 2). Returns (k, 2) float64 with ``k = max(2, ceil(L / spacing) + 1)`` for an open
+    polyline (ends kept) and ``k = max(3, ceil(L / spacing))`` for a closed contour.
+    """
+
+def clip_to_patch(
+    points: ArrayLike2,
+    pose: Pose,
+    half_extents: Extents,
+    margin: float = 0.0,
+    closed: bool = False,
+) -> list[F64]:
+    """The parts of ``points`` inside the oriented patch of ``pose`` (half extents + margin).
+
+    points: (m, 2) in the same frame as ``pose`` (usually world); the result is in that frame too.
+    Open polyline: the pieces inside the patch in the polyline's order, each (k_i, 2), k_i >= 2,
+    entry/exit points exact. Closed ring (``closed=True``, m >= 3): ``[ring]`` with the clipped
+    ring (k, 2) without a repeated first point, or ``[]`` when the ring lies outside.
+    """
+
+def fit_curve(points: ArrayLike2, s: float = 0.5, spacing: float = 1.0) -> F64:
+    """Smoothing parametric cubic spline (scipy ``splprep(s=s, k=3)`` semantics) of ``points``.
+
+    points: (m, 2), m >= 2 distinct points (degree drops to m - 1 for 2 or 3 points). Returns the
+    fitted curve evaluated about ``spacing`` metres apart, ends included: (k, 2) float64.
+    """
+
+def merge_polyline(
+    global_pts: ArrayLike2, detected_pts: ArrayLike2, s: float = 0.5, spacing: float = 1.0
+) -> F64:
+    """Merges a detected polyline into a global one (IC-Mapper Algorithm 2), both world frame.
+
+    global_pts: (m, 2), detected_pts: (d, 2). The detection's orientation is decided from the
+    geometry; the merged points are fitted (``fit_curve`` with ``s``) and resampled about
+    ``spacing`` apart. The result keeps the global direction: (k, 2) float64.
+    """
+
+def polygon_union(rings: Sequence[ArrayLike2] | npt.NDArray[np.floating[Any]]) -> list[F64]:
+    """Union of closed rings (each (n_i, 2) without a repeated first point, or an (R, n, 2) array).
+
+    Returns the outer rings of the union (holes dropped), counter-clockwise, largest area first;
+    several rings when the union falls apart. Each ring (k, 2) float64, first point not repeated.
+    """
+
+def chamfer_distance(a: ArrayLike2, b: ArrayLike2) -> float:
+    """Chamfer distance (mean nearest distance a->b + mean nearest distance b->a) / 2.
+
+    a: (n, 2), b: (m, 2), both non-empty and finite.
+    """
+
+def chamfer_matrix(
+    a: Sequence[ArrayLike2] | npt.NDArray[np.floating[Any]],
+    b: Sequence[ArrayLike2] | npt.NDArray[np.floating[Any]],
+) -> F64:
+    """All pairwise Chamfer distances: (A, B) float64.
+
+    a: an (A, n, 2) array or a list of A arrays (n_i, 2); b likewise with B sets.
+    """
+
+class InstanceInfo(TypedDict):
+    id: int
+    cls: int
+    closed: bool
+    first_frame: int
+    last_frame: int
+    observations: int
+    n_points: int
+
+class GlobalMap:
+    """The global vector map (world frame): instances, bookkeeping and a spatial index.
+
+    Thread-safe: one map may be used from several Python threads (a read-write lock inside; the
+    GIL is released while it is held). Never pickled: use ``save`` / ``load``.
+    """
+
+    def __init__(self, smoothing: float = 0.5, spacing: float = 1.0) -> None:
+        """An empty map; ``smoothing``: the curve-fit ``s`` on merge; ``spacing``: metres between
+        stored points. ValueError on non-finite or non-positive values."""
+
+    @property
+    def smoothing(self) -> float:
+        """The curve-fit smoothing ``s`` used on merge."""
+
+    @property
+    def spacing(self) -> float:
+        """Spacing of the stored dense points, metres."""
+
+    def __len__(self) -> int: ...
+    def __contains__(self, id: object) -> bool: ...
+    def insert(self, cls: int, points: ArrayLike2, frame: int = 0) -> int:
+        """Inserts a new instance of class ``cls`` (0, 1, 2), points (n, 2) world frame, observed
+        at ``frame``; returns its id (assigned increasingly from 0, never reused)."""
+
+    def insert_with_id(self, id: int, cls: int, points: ArrayLike2, frame: int = 0) -> None:
+        """Inserts with a caller-chosen id; ValueError if the id already exists."""
+
+    def merge(self, id: int, points: ArrayLike2, frame: int = 0) -> None:
+        """Merges a detection (n, 2) world frame into instance ``id`` by its class rule (curve fit
+        for polylines, union for crossings). KeyError for an unknown id; on error the instance is
+        unchanged."""
+
+    def remove(self, id: int) -> None:
+        """Removes instance ``id``; KeyError if absent."""
+
+    def get(self, id: int) -> tuple[int, F64]:
+        """``(cls, points (n, 2) float64)`` of instance ``id``; KeyError if absent."""
+
+    def info(self, id: int) -> InstanceInfo:
+        """Bookkeeping of instance ``id``; KeyError if absent."""
+
+    def ids(self) -> npt.NDArray[np.uint64]:
+        """All instance ids, ascending: (k,) uint64."""
+
+    def query(
+        self, pose: Pose, half_extents: Extents, margin: float = 0.0
+    ) -> npt.NDArray[np.uint64]:
+        """Ids (ascending, (k,) uint64) of the instances whose geometry intersects the oriented
+        patch of ``pose`` with half extents ``half_extents + margin``."""
+
+    def sample_patch(
+        self,
+        pose: Pose,
+        half_extents: Extents,
+        margin: float = 20.0,
+        n_points: int = 20,
+    ) -> tuple[
+        npt.NDArray[np.uint64],
+        npt.NDArray[np.int64],
+        npt.NDArray[np.float32],
+        npt.NDArray[np.bool_],
+    ]:
+        """Every instance in the expanded patch, clipped to it and sampled to ``n_points``.
+
+        Returns ``(ids (k,) uint64, cls (k,) int64, pts (k, n_points, 2) float32, mask
+        (k, n_points) bool)``; ``pts`` in the EGO frame of ``pose``; ``mask[i, j]``: point j
+        connects to point j + 1 on the same clipped piece (for a crossing clipped to a single
+        ring the last entry is True). k = 0 gives empty arrays of these shapes.
+        """
+
+    def save(self, path: PathArg) -> None:
+        """Writes the native map file atomically (temp file + rename); OSError on I/O failure."""
+
+    @staticmethod
+    def load(path: PathArg) -> GlobalMap:
+        """Reads a map file; ValueError naming the file if it is not a valid map file (wrong
+        magic, truncated, corrupt), OSError (FileNotFoundError) if it cannot be read."""
+
+    def to_geojson(self, path: PathArg) -> None:
+        """Writes the map as a GeoJSON FeatureCollection (atomically)."""
