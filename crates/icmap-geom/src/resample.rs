@@ -1,19 +1,102 @@
 //! Arc-length resampling of polylines and closed contours.
+//!
+//! Pure geometry on world- or ego-frame points; every function that takes user input either
+//! returns a [`GeomError`] or is total (never panics).
 
-use crate::error::Result;
-use crate::types::Point;
+use crate::error::{GeomError, Result};
+use crate::types::{validate_points, Point};
+
+/// Largest number of points that [`resample_spacing`] produces (guards against `length / spacing`
+/// overflowing memory, e.g. a 1e300 m polyline at 1 m spacing).
+pub const MAX_RESAMPLE_POINTS: usize = 10_000_000;
 
 /// Total length of the polyline (for `closed`, including the closing edge).
 pub fn polyline_length(points: &[Point], closed: bool) -> f64 {
-    let _ = (points, closed);
-    todo!("resample.rs: polyline_length")
+    let mut len: f64 = points.windows(2).map(|w| (w[1] - w[0]).norm()).sum();
+    if closed && points.len() > 1 {
+        len += (points[0] - points[points.len() - 1]).norm();
+    }
+    len
 }
 
-/// Removes consecutive points closer than `eps` to the previous kept point (and, for closed
-/// contours, a last point that repeats the first). Keeps the first and the last point of a polyline.
+/// Removes consecutive points not farther than `eps` from the previous kept point (so `eps = 0`
+/// removes exact repeats), and, for closed contours, trailing points that repeat the first one.
+/// Keeps the first and the last point of an open polyline (the last replaces a kept point closer
+/// than `eps` to it). Non-finite points are dropped (comparisons with NaN fail).
 pub fn dedup(points: &[Point], eps: f64, closed: bool) -> Vec<Point> {
-    let _ = (points, eps, closed);
-    todo!("resample.rs: dedup")
+    let n = points.len();
+    if n <= 1 {
+        return points.to_vec();
+    }
+    let far = |a: &Point, b: &Point| (b - a).norm() > eps;
+    let mut kept: Vec<Point> = Vec::with_capacity(n);
+    kept.push(points[0]);
+    let body_end = if closed { n } else { n - 1 };
+    for p in &points[1..body_end] {
+        if far(kept.last().unwrap_or(&points[0]), p) {
+            kept.push(*p);
+        }
+    }
+    if closed {
+        while kept.len() > 1 && !far(&kept[0], &kept[kept.len() - 1]) {
+            kept.pop();
+        }
+    } else {
+        let last = points[n - 1];
+        let len = kept.len();
+        if len == 1 || far(&kept[len - 1], &last) {
+            kept.push(last);
+        } else {
+            kept[len - 1] = last;
+        }
+    }
+    kept
+}
+
+/// Cumulative arc length at every vertex of `pts` (first entry 0).
+pub(crate) fn cumulative_lengths(pts: &[Point]) -> Vec<f64> {
+    let mut cum = Vec::with_capacity(pts.len());
+    let mut acc = 0.0;
+    cum.push(0.0);
+    for w in pts.windows(2) {
+        acc += (w[1] - w[0]).norm();
+        cum.push(acc);
+    }
+    cum
+}
+
+/// Points of the polyline `pts` (cumulative lengths `cum`) at the non-decreasing arc lengths
+/// `targets`. Targets outside `[0, cum.last()]` are clamped to the ends.
+pub(crate) fn points_at_lengths(pts: &[Point], cum: &[f64], targets: &[f64]) -> Vec<Point> {
+    let nseg = pts.len().saturating_sub(1);
+    let mut out = Vec::with_capacity(targets.len());
+    if nseg == 0 {
+        out.extend(targets.iter().map(|_| pts[0]));
+        return out;
+    }
+    let mut i = 0usize;
+    for &t in targets {
+        while i + 1 < nseg && cum[i + 1] < t {
+            i += 1;
+        }
+        let seg = cum[i + 1] - cum[i];
+        let f = if seg > 0.0 {
+            ((t - cum[i]) / seg).clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
+        out.push(pts[i] + (pts[i + 1] - pts[i]) * f);
+    }
+    out
+}
+
+/// The vertices of `points` with the first point appended for a closed contour.
+fn with_closing(points: &[Point], closed: bool) -> Vec<Point> {
+    let mut pts = points.to_vec();
+    if closed {
+        pts.push(points[0]);
+    }
+    pts
 }
 
 /// Exactly `n` points evenly spaced by arc length.
@@ -21,13 +104,256 @@ pub fn dedup(points: &[Point], eps: f64, closed: bool) -> Vec<Point> {
 /// the contour including the closing edge, starting at the first point, the first not repeated at
 /// the end, `n >= 3`. Errors on fewer than 2 points, non-finite values, zero length, bad `n`.
 pub fn resample(points: &[Point], n: usize, closed: bool) -> Result<Vec<Point>> {
-    let _ = (points, n, closed);
-    todo!("resample.rs: resample")
+    validate_points(points, 2, "polyline")?;
+    let min_n = if closed { 3 } else { 2 };
+    if n < min_n {
+        return Err(GeomError::InvalidParameter {
+            name: "n",
+            reason: format!(
+                "must be >= {min_n} for a {} geometry, got {n}",
+                if closed { "closed" } else { "open" }
+            ),
+        });
+    }
+    let pts = with_closing(points, closed);
+    let cum = cumulative_lengths(&pts);
+    let total = cum[cum.len() - 1];
+    check_length(total)?;
+    let denom = if closed { n as f64 } else { (n - 1) as f64 };
+    let targets: Vec<f64> = (0..n).map(|j| total * (j as f64) / denom).collect();
+    let mut out = points_at_lengths(&pts, &cum, &targets);
+    out[0] = points[0];
+    if !closed {
+        out[n - 1] = points[points.len() - 1];
+    }
+    Ok(out)
+}
+
+/// Errors unless `total` is a finite positive length.
+fn check_length(total: f64) -> Result<()> {
+    if !total.is_finite() {
+        return Err(GeomError::NonFinite {
+            what: "polyline length (coordinates too large)".into(),
+        });
+    }
+    if total <= 0.0 {
+        return Err(GeomError::Degenerate {
+            what: "polyline".into(),
+            reason: "zero length".into(),
+        });
+    }
+    Ok(())
 }
 
 /// Points about `spacing` apart by arc length: `max(2, ceil(length / spacing) + 1)` points for an
 /// open polyline (ends kept), `max(3, ceil(length / spacing))` for a closed contour.
+/// Errors as [`resample`], on a non-positive or non-finite `spacing`, and when more than
+/// [`MAX_RESAMPLE_POINTS`] points would be produced.
 pub fn resample_spacing(points: &[Point], spacing: f64, closed: bool) -> Result<Vec<Point>> {
-    let _ = (points, spacing, closed);
-    todo!("resample.rs: resample_spacing")
+    validate_points(points, 2, "polyline")?;
+    if !(spacing.is_finite() && spacing > 0.0) {
+        return Err(GeomError::InvalidParameter {
+            name: "spacing",
+            reason: format!("must be finite and > 0, got {spacing}"),
+        });
+    }
+    let total = polyline_length(points, closed);
+    check_length(total)?;
+    let segments = (total / spacing).ceil();
+    if !(segments < MAX_RESAMPLE_POINTS as f64) {
+        return Err(GeomError::InvalidParameter {
+            name: "spacing",
+            reason: format!(
+                "length {total} / spacing {spacing} gives more than {MAX_RESAMPLE_POINTS} points"
+            ),
+        });
+    }
+    let segments = segments as usize;
+    let n = if closed {
+        segments.max(3)
+    } else {
+        (segments + 1).max(2)
+    };
+    resample(points, n, closed)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    fn p(x: f64, y: f64) -> Point {
+        Point::new(x, y)
+    }
+
+    #[test]
+    fn length_open_and_closed() {
+        let sq = [p(0.0, 0.0), p(1.0, 0.0), p(1.0, 1.0), p(0.0, 1.0)];
+        assert!((polyline_length(&sq, false) - 3.0).abs() < 1e-12);
+        assert!((polyline_length(&sq, true) - 4.0).abs() < 1e-12);
+        assert_eq!(polyline_length(&[], true), 0.0);
+        assert_eq!(polyline_length(&sq[..1], true), 0.0);
+    }
+
+    #[test]
+    fn dedup_removes_repeats_keeps_ends() {
+        let pts = [
+            p(0.0, 0.0),
+            p(0.0, 0.0),
+            p(1.0, 0.0),
+            p(1.0, 0.0 + 1e-12),
+            p(2.0, 0.0),
+            p(2.0, 1e-13),
+        ];
+        let d = dedup(&pts, 1e-9, false);
+        assert_eq!(d, vec![p(0.0, 0.0), p(1.0, 0.0), p(2.0, 1e-13)]);
+        let ring = [p(0.0, 0.0), p(1.0, 0.0), p(1.0, 1.0), p(0.0, 0.0)];
+        assert_eq!(dedup(&ring, 0.0, true).len(), 3);
+        let same = [p(3.0, 3.0), p(3.0, 3.0), p(3.0, 3.0)];
+        assert_eq!(dedup(&same, 0.0, false).len(), 2);
+        assert_eq!(dedup(&same, 0.0, true).len(), 1);
+    }
+
+    #[test]
+    fn resample_open_even() {
+        let pts = [p(0.0, 0.0), p(10.0, 0.0)];
+        let r = resample(&pts, 11, false).unwrap();
+        for (j, q) in r.iter().enumerate() {
+            assert!((q.x - j as f64).abs() < 1e-12 && q.y == 0.0);
+        }
+    }
+
+    #[test]
+    fn resample_closed_goes_around() {
+        let sq = [p(0.0, 0.0), p(1.0, 0.0), p(1.0, 1.0), p(0.0, 1.0)];
+        let r = resample(&sq, 8, true).unwrap();
+        let want = [
+            (0.0, 0.0),
+            (0.5, 0.0),
+            (1.0, 0.0),
+            (1.0, 0.5),
+            (1.0, 1.0),
+            (0.5, 1.0),
+            (0.0, 1.0),
+            (0.0, 0.5),
+        ];
+        assert_eq!(r.len(), 8);
+        for (q, w) in r.iter().zip(want) {
+            assert!(
+                (q.x - w.0).abs() < 1e-12 && (q.y - w.1).abs() < 1e-12,
+                "{q:?} vs {w:?}"
+            );
+        }
+    }
+
+    #[test]
+    fn resample_errors() {
+        let line = [p(0.0, 0.0), p(1.0, 0.0)];
+        assert!(matches!(
+            resample(&[], 5, false),
+            Err(GeomError::TooFewPoints { .. })
+        ));
+        assert!(matches!(
+            resample(&line[..1], 5, false),
+            Err(GeomError::TooFewPoints { .. })
+        ));
+        assert!(matches!(
+            resample(&[p(f64::NAN, 0.0), p(1.0, 0.0)], 5, false),
+            Err(GeomError::NonFinite { .. })
+        ));
+        assert!(matches!(
+            resample(&[p(f64::INFINITY, 0.0), p(1.0, 0.0)], 5, false),
+            Err(GeomError::NonFinite { .. })
+        ));
+        assert!(matches!(
+            resample(&[p(1.0, 1.0), p(1.0, 1.0)], 5, false),
+            Err(GeomError::Degenerate { .. })
+        ));
+        assert!(matches!(
+            resample(&line, 1, false),
+            Err(GeomError::InvalidParameter { .. })
+        ));
+        assert!(matches!(
+            resample(&line, 2, true),
+            Err(GeomError::InvalidParameter { .. })
+        ));
+        assert!(matches!(
+            resample(&[p(-1e308, 0.0), p(1e308, 0.0)], 5, false),
+            Err(GeomError::NonFinite { .. })
+        ));
+        assert!(matches!(
+            resample_spacing(&line, 0.0, false),
+            Err(GeomError::InvalidParameter { .. })
+        ));
+        assert!(matches!(
+            resample_spacing(&line, f64::NAN, false),
+            Err(GeomError::InvalidParameter { .. })
+        ));
+        assert!(matches!(
+            resample_spacing(&[p(0.0, 0.0), p(1e150, 0.0)], 1.0, false),
+            Err(GeomError::InvalidParameter { .. })
+        ));
+    }
+
+    #[test]
+    fn resample_spacing_counts() {
+        let line = [p(0.0, 0.0), p(10.0, 0.0)];
+        assert_eq!(resample_spacing(&line, 1.0, false).unwrap().len(), 11);
+        assert_eq!(resample_spacing(&line, 3.0, false).unwrap().len(), 5);
+        assert_eq!(resample_spacing(&line, 100.0, false).unwrap().len(), 2);
+        assert_eq!(resample_spacing(&line, 1.0, true).unwrap().len(), 20);
+        assert_eq!(resample_spacing(&line, 100.0, true).unwrap().len(), 3);
+    }
+
+    fn polyline_strategy() -> impl Strategy<Value = Vec<Point>> {
+        prop::collection::vec((-100.0f64..100.0, -100.0f64..100.0), 2..30)
+            .prop_map(|v| v.into_iter().map(|(x, y)| p(x, y)).collect())
+    }
+
+    proptest! {
+        #[test]
+        fn prop_resample_keeps_ends_and_length(pts in polyline_strategy(), n in 2usize..50) {
+            let len = polyline_length(&pts, false);
+            prop_assume!(len > 1e-6);
+            let r = resample(&pts, n, false).unwrap();
+            prop_assert_eq!(r.len(), n);
+            prop_assert_eq!(r[0], pts[0]);
+            prop_assert_eq!(r[n - 1], pts[pts.len() - 1]);
+            prop_assert!(r.iter().all(|q| q.x.is_finite() && q.y.is_finite()));
+            // Resampling never lengthens the polyline (chords of the original).
+            prop_assert!(polyline_length(&r, false) <= len * (1.0 + 1e-9) + 1e-9);
+        }
+
+        #[test]
+        fn prop_fine_resample_keeps_length(pts in polyline_strategy(), closed in any::<bool>()) {
+            let len = polyline_length(&pts, closed);
+            prop_assume!(len > 1e-3);
+            // About 200 samples per vertex: the corners cut off are tiny.
+            let r = resample(&pts, 200 * pts.len() + 3, closed).unwrap();
+            let rl = polyline_length(&r, closed);
+            prop_assert!((rl - len).abs() <= 0.02 * len, "{} vs {}", rl, len);
+        }
+
+        #[test]
+        fn prop_resample_spacing_even(pts in polyline_strategy(), spacing in 0.1f64..20.0) {
+            let len = polyline_length(&pts, false);
+            prop_assume!(len > 1e-6);
+            let r = resample_spacing(&pts, spacing, false).unwrap();
+            prop_assert_eq!(r.len(), ((len / spacing).ceil() as usize + 1).max(2));
+            // Consecutive samples are at most one arc step apart (chord <= arc).
+            let step = len / (r.len() - 1) as f64;
+            prop_assert!(r.windows(2).all(|w| (w[1] - w[0]).norm() <= step * (1.0 + 1e-9) + 1e-9));
+        }
+
+        #[test]
+        fn prop_no_panic_arbitrary(v in prop::collection::vec((any::<f64>(), any::<f64>()), 0..6), n in 0usize..10, closed in any::<bool>(), sp in any::<f64>()) {
+            let pts: Vec<Point> = v.into_iter().map(|(x, y)| p(x, y)).collect();
+            let _ = polyline_length(&pts, closed);
+            let _ = dedup(&pts, 0.0, closed);
+            if let Ok(r) = resample(&pts, n, closed) {
+                prop_assert!(r.iter().all(|q| q.x.is_finite() && q.y.is_finite()));
+            }
+            let _ = resample_spacing(&pts, sp, closed);
+        }
+    }
 }
