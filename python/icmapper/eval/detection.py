@@ -1,0 +1,159 @@
+"""Detection AP with the Chamfer protocol of StreamMapNet / IC-Mapper (numpy, no I/O).
+
+Per class, predictions of all frames are taken by descending score (ties: table order, stable);
+each is compared with its *nearest* ground truth of the same class in the same frame only (ties:
+the lower table row): a true positive if that distance is within the threshold and that ground
+truth is not yet taken, else a false positive (no fall-back to the next-nearest). A prediction in a
+frame (and class) without ground truth is a false positive. AP is the area under the monotone
+precision envelope (VOC "area", as mmdet's ``average_precision(mode="area")``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from icmapper.eval.chamfer import Resampled, sparse_chamfer
+from icmapper.eval.instances import Instances
+
+CLASS_NAMES: tuple[str, ...] = ("ped_crossing", "divider", "boundary")
+#: Chamfer thresholds (metres) per perception range name.
+THRESHOLDS: dict[str, tuple[float, ...]] = {"60x30": (0.5, 1.0, 1.5), "100x50": (1.0, 1.5, 2.0)}
+
+
+@dataclass
+class Matching:
+    """Chamfer relations of predictions and ground truth for one evaluation.
+
+    pairs_pred, pairs_gt, pairs_dist (P,): every same-frame, same-class pair with Chamfer
+    distance <= max_dist (exact), sorted by prediction then ground truth row.
+    nearest_gt (N,) int64: per prediction the nearest ground-truth row (-1 when no ground truth
+    lies within max_dist — then it is a false positive at every threshold <= max_dist);
+    nearest_dist (N,) float64 (inf when -1).
+    """
+
+    max_dist: float
+    pairs_pred: NDArray[np.int64]
+    pairs_gt: NDArray[np.int64]
+    pairs_dist: NDArray[np.float64]
+    nearest_gt: NDArray[np.int64]
+    nearest_dist: NDArray[np.float64]
+
+
+def prepare(inst: Instances) -> Resampled:
+    """Resamples a table's instances to the protocol's 200 points (crossings closed)."""
+    return Resampled.from_points(inst.points, inst.classes == 0)
+
+
+def match(
+    pred: Instances,
+    gt: Instances,
+    max_dist: float,
+    pred_res: Resampled | None = None,
+    gt_res: Resampled | None = None,
+) -> Matching:
+    """Chamfer pairs (<= max_dist) and nearest ground truth of every prediction.
+
+    pred, gt: tables in the same frames (same seq/frame numbering), points in the same frame.
+    """
+    pred_res = prepare(pred) if pred_res is None else pred_res
+    gt_res = prepare(gt) if gt_res is None else gt_res
+    num_frames = int(max(pred.frame.max(initial=0), gt.frame.max(initial=0))) + 1
+    ip, ig, dist = sparse_chamfer(
+        pred_res, pred.key(num_frames), gt_res, gt.key(num_frames), max_dist
+    )
+    nearest_gt = np.full(len(pred), -1, dtype=np.int64)
+    nearest_dist = np.full(len(pred), np.inf)
+    if ip.size:
+        order = np.lexsort((ig, dist, ip))  # by prediction, then distance, then gt row
+        first = np.ones(order.size, dtype=bool)
+        first[1:] = ip[order[1:]] != ip[order[:-1]]
+        sel = order[first]
+        nearest_gt[ip[sel]] = ig[sel]
+        nearest_dist[ip[sel]] = dist[sel]
+    return Matching(max_dist, ip, ig, dist, nearest_gt, nearest_dist)
+
+
+def score_order(scores: NDArray[np.float64]) -> NDArray[np.int64]:
+    """Row order by descending score, ties in table order."""
+    return np.argsort(-scores, kind="stable").astype(np.int64)
+
+
+def true_positives(m: Matching, order: NDArray[np.int64], threshold: float) -> NDArray[np.bool_]:
+    """(N,) bool: the greedy TP decision of every prediction at one threshold.
+
+    order (N,): the score order (:func:`score_order`). A prediction is TP iff its nearest ground
+    truth is within the threshold and no earlier prediction (in score order) took that ground
+    truth — equivalently, the first in score order among those whose nearest ground truth is it.
+    """
+    if threshold > m.max_dist:
+        raise ValueError(f"threshold {threshold} exceeds the matching's max_dist {m.max_dist}")
+    cand = order[m.nearest_dist[order] <= threshold]  # candidate rows, in score order
+    _, first = np.unique(m.nearest_gt[cand], return_index=True)
+    tp = np.zeros(m.nearest_gt.shape[0], dtype=bool)
+    tp[cand[first]] = True
+    return tp
+
+
+def average_precision(tp_sorted: NDArray[np.bool_], num_gt: int) -> float:
+    """VOC "area" AP of a ranked list of TP flags (score order); NaN when num_gt == 0."""
+    if num_gt == 0:
+        return float("nan")
+    tp = np.cumsum(tp_sorted, dtype=np.float64)  # (n,)
+    fp = np.cumsum(~tp_sorted, dtype=np.float64)  # (n,)
+    eps = np.finfo(np.float32).eps
+    recall = tp / max(num_gt, eps)
+    precision = tp / np.maximum(tp + fp, eps)
+    mrec = np.concatenate([[0.0], recall, [1.0]])
+    mpre = np.concatenate([[0.0], precision, [0.0]])
+    mpre = np.maximum.accumulate(mpre[::-1])[::-1]  # monotone envelope
+    idx = np.flatnonzero(mrec[1:] != mrec[:-1])
+    return float(np.sum((mrec[idx + 1] - mrec[idx]) * mpre[idx + 1]))
+
+
+def ap_table(
+    pred: Instances, gt: Instances, tp: NDArray[np.bool_], order: NDArray[np.int64]
+) -> dict[str, float]:
+    """Per-class AP from TP flags (N,) and the score order -> {class name: AP}."""
+    out = {}
+    cls_sorted = pred.classes[order]
+    for c, name in enumerate(CLASS_NAMES):
+        ranked = tp[order][cls_sorted == c]
+        out[name] = average_precision(ranked, int(np.count_nonzero(gt.classes == c)))
+    return out
+
+
+def mean_ignore_nan(values: list[float]) -> float:
+    """Mean of the finite-or-inf values, NaN entries (classes without ground truth) left out."""
+    vals = [v for v in values if not np.isnan(v)]
+    return float(np.mean(vals)) if vals else float("nan")
+
+
+def detection_ap(
+    pred: Instances,
+    gt: Instances,
+    thresholds: tuple[float, ...],
+    m: Matching | None = None,
+) -> dict:
+    """Detection AP per class and threshold, per-class mean and mAP.
+
+    Returns {"thresholds": [...], "AP": {class: {str(thr): AP}}, "AP_class": {class: mean over
+    thresholds}, "mAP": mean over classes and thresholds}. Classes without ground truth give NaN
+    and are left out of the means.
+    """
+    m = match(pred, gt, max(thresholds)) if m is None else m
+    order = score_order(pred.scores)
+    per = {name: {} for name in CLASS_NAMES}
+    for thr in thresholds:
+        aps = ap_table(pred, gt, true_positives(m, order, thr), order)
+        for name in CLASS_NAMES:
+            per[name][f"{thr:g}"] = aps[name]
+    ap_class = {name: mean_ignore_nan(list(per[name].values())) for name in CLASS_NAMES}
+    return {
+        "thresholds": [float(t) for t in thresholds],
+        "AP": per,
+        "AP_class": ap_class,
+        "mAP": mean_ignore_nan(list(ap_class.values())),
+    }
