@@ -1,7 +1,24 @@
 //! The global map store: instances with bookkeeping, kept in dense slots and indexed spatially.
+//!
+//! Layout: `slots: Vec<Option<Instance>>` (dense, freed slots are recycled through a free list),
+//! `id -> slot` hash map, and a [`SpatialIndex`] over each live slot's bounding box. Ids are
+//! assigned increasingly from 0 and never reused (`next_id` only grows).
 
-use crate::error::Result;
-use crate::types::{MapClass, Patch, Point};
+use crate::clip::{clip_polygon, clip_polyline, sample_pieces};
+use crate::error::{GeomError, Result};
+use crate::index::SpatialIndex;
+use crate::merge::{merge_polygon, merge_polyline};
+use crate::resample::{dedup, resample_spacing};
+use crate::types::{validate_points, MapClass, Patch, Point};
+use parry2d_f64::bounding_volume::Aabb;
+use std::collections::HashMap;
+
+/// Points closer than this (metres) to the previous one are dropped before storing a crossing ring
+/// (this also removes a repeated closing point).
+const DEDUP_EPS: f64 = 1e-9;
+
+/// The most points [`GlobalMap::sample_patch`] samples per instance.
+pub const MAX_PATCH_POINTS: usize = 1_000_000;
 
 /// Tunables of the store.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -14,7 +31,29 @@ pub struct MapConfig {
 
 impl Default for MapConfig {
     fn default() -> Self {
-        MapConfig { smoothing: 0.5, spacing: 1.0 }
+        MapConfig {
+            smoothing: 0.5,
+            spacing: 1.0,
+        }
+    }
+}
+
+impl MapConfig {
+    /// Checks `smoothing >= 0` and `spacing > 0`, both finite.
+    pub fn validate(&self) -> Result<()> {
+        if !(self.smoothing.is_finite() && self.smoothing >= 0.0) {
+            return Err(GeomError::InvalidParameter {
+                name: "smoothing",
+                reason: format!("must be finite and >= 0, got {}", self.smoothing),
+            });
+        }
+        if !(self.spacing.is_finite() && self.spacing > 0.0) {
+            return Err(GeomError::InvalidParameter {
+                name: "spacing",
+                reason: format!("must be finite and > 0, got {}", self.spacing),
+            });
+        }
+        Ok(())
     }
 }
 
@@ -32,6 +71,47 @@ pub struct Instance {
     pub observations: u32,
 }
 
+impl Instance {
+    /// Checks the invariants of a stored instance: `closed == class.is_closed()`, finite points,
+    /// at least 2 points (3 for a closed ring), `first_frame <= last_frame`, `observations >= 1`.
+    pub fn validate(&self) -> Result<()> {
+        if self.closed != self.class.is_closed() {
+            return Err(GeomError::InvalidParameter {
+                name: "closed",
+                reason: format!(
+                    "instance {}: class {} requires closed = {}",
+                    self.id,
+                    self.class.name(),
+                    self.class.is_closed()
+                ),
+            });
+        }
+        let what = format!("instance {} points", self.id);
+        validate_points(&self.points, if self.closed { 3 } else { 2 }, &what)?;
+        if self.first_frame > self.last_frame {
+            return Err(GeomError::InvalidParameter {
+                name: "first_frame",
+                reason: format!(
+                    "instance {}: first_frame {} > last_frame {}",
+                    self.id, self.first_frame, self.last_frame
+                ),
+            });
+        }
+        if self.observations == 0 {
+            return Err(GeomError::InvalidParameter {
+                name: "observations",
+                reason: format!("instance {}: must be >= 1", self.id),
+            });
+        }
+        Ok(())
+    }
+
+    /// The world-axis-aligned bounding box of the points (`points` must be non-empty).
+    pub fn aabb(&self) -> Aabb {
+        points_aabb(&self.points)
+    }
+}
+
 /// The result of [`GlobalMap::sample_patch`]: `k` instances that intersect the patch.
 #[derive(Debug, Clone, PartialEq)]
 pub struct PatchSample {
@@ -45,69 +125,872 @@ pub struct PatchSample {
     pub n_points: usize,
 }
 
+impl PatchSample {
+    /// Number of instances `k`.
+    pub fn len(&self) -> usize {
+        self.ids.len()
+    }
+
+    /// Whether no instance was sampled.
+    pub fn is_empty(&self) -> bool {
+        self.ids.is_empty()
+    }
+}
+
 /// The global vector map.
 #[derive(Debug, Clone)]
 pub struct GlobalMap {
-    // filled in by store.rs's implementer: config, slots, id -> slot map, free list, next id,
-    // crate::index::SpatialIndex
-    _private: (),
+    config: MapConfig,
+    /// Dense slots; `None` marks a free slot (listed in `free`).
+    slots: Vec<Option<Instance>>,
+    id_to_slot: HashMap<u64, u32>,
+    free: Vec<u32>,
+    /// The next automatic id; every id in the map is below it.
+    next_id: u64,
+    index: SpatialIndex,
+}
+
+fn points_aabb(points: &[Point]) -> Aabb {
+    let mut mins = points[0];
+    let mut maxs = points[0];
+    for p in &points[1..] {
+        mins = mins.inf(p);
+        maxs = maxs.sup(p);
+    }
+    Aabb::new(mins, maxs)
+}
+
+fn patch_is_finite(patch: &Patch) -> bool {
+    let p = &patch.pose;
+    p.x.is_finite()
+        && p.y.is_finite()
+        && p.yaw.is_finite()
+        && patch.half_extents.x.is_finite()
+        && patch.half_extents.y.is_finite()
+        && patch.half_extents.x >= 0.0
+        && patch.half_extents.y >= 0.0
 }
 
 impl GlobalMap {
     /// An empty map.
     pub fn new(config: MapConfig) -> Result<Self> {
-        let _ = config;
-        todo!("store.rs: new")
+        config.validate()?;
+        Ok(GlobalMap {
+            config,
+            slots: Vec::new(),
+            id_to_slot: HashMap::new(),
+            free: Vec::new(),
+            next_id: 0,
+            index: SpatialIndex::new(),
+        })
     }
+
+    /// A map from stored parts (used by loading): every instance is validated, ids must be unique
+    /// and below `next_id`. Points are taken as they are (not resampled).
+    pub fn from_parts(config: MapConfig, next_id: u64, instances: Vec<Instance>) -> Result<Self> {
+        let mut map = GlobalMap::new(config)?;
+        if instances.len() > u32::MAX as usize {
+            return Err(GeomError::InvalidParameter {
+                name: "instances",
+                reason: "more than 2^32 - 1 instances".into(),
+            });
+        }
+        map.slots.reserve(instances.len());
+        for inst in instances {
+            inst.validate()?;
+            if inst.id >= next_id {
+                return Err(GeomError::InvalidParameter {
+                    name: "next_id",
+                    reason: format!("instance id {} is not below next_id {next_id}", inst.id),
+                });
+            }
+            let slot = map.slots.len() as u32;
+            if map.id_to_slot.insert(inst.id, slot).is_some() {
+                return Err(GeomError::DuplicateId(inst.id));
+            }
+            map.slots.push(Some(inst));
+        }
+        map.next_id = next_id;
+        map.index = SpatialIndex::from_boxes(
+            map.slots
+                .iter()
+                .enumerate()
+                .filter_map(|(s, i)| i.as_ref().map(|i| (s as u32, i.aabb()))),
+        );
+        Ok(map)
+    }
+
     pub fn config(&self) -> MapConfig {
-        todo!()
+        self.config
     }
+
+    /// Replaces the tunables (used by later inserts and merges; stored points are not touched).
+    pub fn set_config(&mut self, config: MapConfig) -> Result<()> {
+        config.validate()?;
+        self.config = config;
+        Ok(())
+    }
+
     /// Number of instances.
     pub fn len(&self) -> usize {
-        todo!()
+        self.id_to_slot.len()
     }
+
     pub fn is_empty(&self) -> bool {
         self.len() == 0
     }
+
+    /// The id the next [`GlobalMap::insert`] will assign (every id in the map is below it).
+    pub fn next_id(&self) -> u64 {
+        self.next_id
+    }
+
+    /// Whether instance `id` is in the map.
+    pub fn contains(&self, id: u64) -> bool {
+        self.id_to_slot.contains_key(&id)
+    }
+
+    /// Validates a detection for `class` and returns the points to store (resampled at spacing).
+    fn prepare(&self, class: MapClass, points: &[Point]) -> Result<Vec<Point>> {
+        let closed = class.is_closed();
+        let what = if closed { "crossing ring" } else { "polyline" };
+        validate_points(points, 2, what)?;
+        if closed {
+            let ring = dedup(points, DEDUP_EPS, true);
+            validate_points(&ring, 3, what)?;
+            resample_spacing(&ring, self.config.spacing, true)
+        } else {
+            resample_spacing(points, self.config.spacing, false)
+        }
+    }
+
+    fn alloc_slot(&mut self, inst: Instance) -> Result<u32> {
+        let slot = match self.free.pop() {
+            Some(s) => s,
+            None => {
+                if self.slots.len() >= u32::MAX as usize {
+                    return Err(GeomError::InvalidParameter {
+                        name: "id",
+                        reason: "the map is full (2^32 - 1 slots)".into(),
+                    });
+                }
+                self.slots.push(None);
+                (self.slots.len() - 1) as u32
+            }
+        };
+        let aabb = inst.aabb();
+        self.id_to_slot.insert(inst.id, slot);
+        self.slots[slot as usize] = Some(inst);
+        self.index.upsert(slot, aabb);
+        Ok(slot)
+    }
+
     /// Inserts a new instance (points resampled at `spacing`) observed at `frame`; returns its id
     /// (ids are assigned increasingly from 0 and never reused).
     pub fn insert(&mut self, class: MapClass, points: &[Point], frame: i64) -> Result<u64> {
-        let _ = (class, points, frame);
-        todo!()
+        let id = self.next_id;
+        self.insert_with_id(id, class, points, frame)?;
+        Ok(id)
     }
+
     /// Inserts with a caller-chosen id (errors on a duplicate id); later automatic ids stay above it.
-    pub fn insert_with_id(&mut self, id: u64, class: MapClass, points: &[Point], frame: i64) -> Result<()> {
-        let _ = (id, class, points, frame);
-        todo!()
+    pub fn insert_with_id(
+        &mut self,
+        id: u64,
+        class: MapClass,
+        points: &[Point],
+        frame: i64,
+    ) -> Result<()> {
+        if id == u64::MAX {
+            return Err(GeomError::InvalidParameter {
+                name: "id",
+                reason: "id 2^64 - 1 is reserved".into(),
+            });
+        }
+        if self.id_to_slot.contains_key(&id) {
+            return Err(GeomError::DuplicateId(id));
+        }
+        let stored = self.prepare(class, points)?;
+        let inst = Instance {
+            id,
+            class,
+            points: stored,
+            closed: class.is_closed(),
+            first_frame: frame,
+            last_frame: frame,
+            observations: 1,
+        };
+        self.alloc_slot(inst)?;
+        self.next_id = self.next_id.max(id + 1);
+        Ok(())
     }
+
     /// Merges a detection into instance `id` by its class rule (curve fit or polygon union) and
     /// updates the index and bookkeeping. On error the instance is unchanged.
     pub fn merge(&mut self, id: u64, points: &[Point], frame: i64) -> Result<()> {
-        let _ = (id, points, frame);
-        todo!()
+        let slot = *self.id_to_slot.get(&id).ok_or(GeomError::UnknownId(id))?;
+        let inst = self.slots[slot as usize]
+            .as_ref()
+            .ok_or(GeomError::UnknownId(id))?;
+        let merged = if inst.closed {
+            let what = "detected crossing ring";
+            validate_points(points, 2, what)?;
+            let ring = dedup(points, DEDUP_EPS, true);
+            validate_points(&ring, 3, what)?;
+            merge_polygon(&inst.points, &ring, self.config.spacing)?
+        } else {
+            validate_points(points, 2, "detected polyline")?;
+            merge_polyline(
+                &inst.points,
+                points,
+                self.config.smoothing,
+                self.config.spacing,
+            )?
+        };
+        // Keep the store's invariants whatever the merge produced.
+        validate_points(&merged, if inst.closed { 3 } else { 2 }, "merged geometry")?;
+        let aabb = points_aabb(&merged);
+        let inst = self.slots[slot as usize]
+            .as_mut()
+            .ok_or(GeomError::UnknownId(id))?;
+        inst.points = merged;
+        inst.first_frame = inst.first_frame.min(frame);
+        inst.last_frame = inst.last_frame.max(frame);
+        inst.observations = inst.observations.saturating_add(1);
+        self.index.upsert(slot, aabb);
+        Ok(())
     }
+
     /// Removes and returns instance `id`.
     pub fn remove(&mut self, id: u64) -> Result<Instance> {
-        let _ = id;
-        todo!()
+        let slot = self
+            .id_to_slot
+            .remove(&id)
+            .ok_or(GeomError::UnknownId(id))?;
+        let inst = self.slots[slot as usize]
+            .take()
+            .ok_or(GeomError::UnknownId(id))?;
+        self.index.remove(slot);
+        self.free.push(slot);
+        Ok(inst)
     }
+
+    /// Removes every instance (`next_id` is kept, so ids are still never reused).
+    pub fn clear(&mut self) {
+        self.slots.clear();
+        self.id_to_slot.clear();
+        self.free.clear();
+        self.index.clear();
+    }
+
     pub fn get(&self, id: u64) -> Option<&Instance> {
-        let _ = id;
-        todo!()
+        let slot = *self.id_to_slot.get(&id)?;
+        self.slots.get(slot as usize)?.as_ref()
     }
+
     /// All instances in ascending id order.
     pub fn instances(&self) -> Vec<&Instance> {
-        todo!()
+        let mut v: Vec<&Instance> = self.instances_iter().collect();
+        v.sort_unstable_by_key(|i| i.id);
+        v
     }
+
+    /// All instances in storage (slot) order, without sorting.
+    pub fn instances_iter(&self) -> impl Iterator<Item = &Instance> + '_ {
+        self.slots.iter().filter_map(Option::as_ref)
+    }
+
+    /// All ids, ascending.
+    pub fn ids(&self) -> Vec<u64> {
+        let mut v: Vec<u64> = self.id_to_slot.keys().copied().collect();
+        v.sort_unstable();
+        v
+    }
+
+    /// The bounding box of instance `id` as held by the spatial index.
+    pub fn bbox(&self, id: u64) -> Option<Aabb> {
+        let slot = *self.id_to_slot.get(&id)?;
+        self.index.get(slot).copied()
+    }
+
+    /// Ids (ascending) of the instances whose bounding box intersects `aabb` (no exact test).
+    pub fn query_aabb(&self, aabb: &Aabb) -> Vec<u64> {
+        let mut ids: Vec<u64> = self
+            .index
+            .query(aabb)
+            .into_iter()
+            .filter_map(|s| self.slots.get(s as usize)?.as_ref().map(|i| i.id))
+            .collect();
+        ids.sort_unstable();
+        ids
+    }
+
+    /// Candidates of the patch's world box, as instances sorted by id.
+    fn candidates(&self, patch: &Patch) -> Vec<&Instance> {
+        let mut v: Vec<&Instance> = self
+            .index
+            .query(&patch.world_aabb())
+            .into_iter()
+            .filter_map(|s| self.slots.get(s as usize)?.as_ref())
+            .collect();
+        v.sort_unstable_by_key(|i| i.id);
+        v
+    }
+
     /// Ids (ascending) of the instances whose geometry intersects the patch (exact test after the
-    /// bounding-box query).
+    /// bounding-box query). A patch with non-finite or negative values intersects nothing.
     pub fn query(&self, patch: &Patch) -> Vec<u64> {
-        let _ = patch;
-        todo!()
+        if !patch_is_finite(patch) {
+            return Vec::new();
+        }
+        self.candidates(patch)
+            .into_iter()
+            .filter(|inst| {
+                if inst.closed {
+                    !clip_polygon(&inst.points, patch).is_empty()
+                } else {
+                    !clip_polyline(&inst.points, patch).is_empty()
+                }
+            })
+            .map(|inst| inst.id)
+            .collect()
     }
+
     /// Every instance in the patch clipped to it and sampled evenly to `n_points` in the ego frame.
+    ///
+    /// Instances whose clipped geometry has zero length are skipped. Errors on a non-finite or
+    /// negative patch, on `n_points < 2` or `> MAX_PATCH_POINTS`, and on `n_points < 3` when a
+    /// closed crossing is to be sampled.
     pub fn sample_patch(&self, patch: &Patch, n_points: usize) -> Result<PatchSample> {
-        let _ = (patch, n_points);
-        todo!()
+        if !patch_is_finite(patch) {
+            return Err(GeomError::NonFinite {
+                what: "patch (pose or half extents, or negative extents)".into(),
+            });
+        }
+        if !(2..=MAX_PATCH_POINTS).contains(&n_points) {
+            return Err(GeomError::InvalidParameter {
+                name: "n_points",
+                reason: format!("must be in 2..={MAX_PATCH_POINTS}, got {n_points}"),
+            });
+        }
+        let iso_inv = patch.pose.isometry().inverse();
+        let mut out = PatchSample {
+            ids: Vec::new(),
+            classes: Vec::new(),
+            points: Vec::new(),
+            mask: Vec::new(),
+            n_points,
+        };
+        for inst in self.candidates(patch) {
+            let sampled = if inst.closed {
+                let ring = clip_polygon(&inst.points, patch);
+                if ring.is_empty() {
+                    continue;
+                }
+                if n_points < 3 {
+                    return Err(GeomError::InvalidParameter {
+                        name: "n_points",
+                        reason: format!(
+                            "a closed crossing needs at least 3 points, got {n_points}"
+                        ),
+                    });
+                }
+                sample_pieces(&[ring], true, n_points)?
+            } else {
+                let pieces = clip_polyline(&inst.points, patch);
+                if pieces.is_empty() {
+                    continue;
+                }
+                sample_pieces(&pieces, false, n_points)?
+            };
+            let Some((pts, mask)) = sampled else { continue };
+            if pts.len() != n_points || mask.len() != n_points {
+                return Err(GeomError::InvalidParameter {
+                    name: "n_points",
+                    reason: format!(
+                        "sampling returned {} points for {n_points} requested",
+                        pts.len()
+                    ),
+                });
+            }
+            out.ids.push(inst.id);
+            out.classes.push(inst.class);
+            out.points.extend(pts.iter().map(|p| iso_inv * p));
+            out.mask.extend_from_slice(&mask);
+        }
+        Ok(out)
+    }
+
+    /// Checks the internal bookkeeping (slots, id map, free list, index boxes); for tests.
+    #[doc(hidden)]
+    pub fn check_invariants(&self) -> std::result::Result<(), String> {
+        let mut live = 0usize;
+        for (s, inst) in self.slots.iter().enumerate() {
+            match inst {
+                Some(i) => {
+                    live += 1;
+                    if self.id_to_slot.get(&i.id) != Some(&(s as u32)) {
+                        return Err(format!("id {} not mapped to slot {s}", i.id));
+                    }
+                    if i.id >= self.next_id {
+                        return Err(format!("id {} >= next_id {}", i.id, self.next_id));
+                    }
+                    if self.index.get(s as u32) != Some(&i.aabb()) {
+                        return Err(format!(
+                            "index box of slot {s} differs from the instance box"
+                        ));
+                    }
+                    i.validate().map_err(|e| e.to_string())?;
+                }
+                None => {
+                    if !self.free.contains(&(s as u32)) {
+                        return Err(format!("empty slot {s} not in the free list"));
+                    }
+                    if self.index.get(s as u32).is_some() {
+                        return Err(format!("empty slot {s} still indexed"));
+                    }
+                }
+            }
+        }
+        if live != self.id_to_slot.len() || live != self.index.len() {
+            return Err(format!(
+                "{live} live slots, {} ids, {} indexed",
+                self.id_to_slot.len(),
+                self.index.len()
+            ));
+        }
+        if self.free.len() + live != self.slots.len() {
+            return Err("free list size mismatch".into());
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::types::Pose2;
+    use proptest::prelude::*;
+
+    fn p(x: f64, y: f64) -> Point {
+        Point::new(x, y)
+    }
+
+    fn line(x0: f64, y0: f64, x1: f64, y1: f64) -> Vec<Point> {
+        vec![p(x0, y0), p(x1, y1)]
+    }
+
+    fn square(cx: f64, cy: f64, h: f64) -> Vec<Point> {
+        vec![
+            p(cx - h, cy - h),
+            p(cx + h, cy - h),
+            p(cx + h, cy + h),
+            p(cx - h, cy + h),
+        ]
+    }
+
+    fn map() -> GlobalMap {
+        GlobalMap::new(MapConfig::default()).unwrap()
+    }
+
+    #[test]
+    fn config_validation() {
+        for (s, d) in [
+            (-1.0, 1.0),
+            (f64::NAN, 1.0),
+            (0.5, 0.0),
+            (0.5, -1.0),
+            (0.5, f64::INFINITY),
+        ] {
+            assert!(
+                GlobalMap::new(MapConfig {
+                    smoothing: s,
+                    spacing: d
+                })
+                .is_err(),
+                "{s} {d}"
+            );
+        }
+        let mut m = map();
+        assert!(m
+            .set_config(MapConfig {
+                smoothing: 0.0,
+                spacing: f64::NAN
+            })
+            .is_err());
+        assert_eq!(m.config(), MapConfig::default());
+        m.set_config(MapConfig {
+            smoothing: 0.0,
+            spacing: 2.0,
+        })
+        .unwrap();
+        assert_eq!(m.config().spacing, 2.0);
+    }
+
+    #[test]
+    fn insert_assigns_increasing_ids_and_resamples() {
+        let mut m = map();
+        let a = m
+            .insert(MapClass::Divider, &line(0.0, 0.0, 10.0, 0.0), 3)
+            .unwrap();
+        let b = m
+            .insert(MapClass::PedCrossing, &square(50.0, 0.0, 2.0), 4)
+            .unwrap();
+        assert_eq!((a, b), (0, 1));
+        let ia = m.get(a).unwrap();
+        assert_eq!(ia.points.len(), 11);
+        assert!(!ia.closed);
+        assert_eq!((ia.first_frame, ia.last_frame, ia.observations), (3, 3, 1));
+        let ib = m.get(b).unwrap();
+        assert!(ib.closed);
+        assert_eq!(ib.points.len(), 16);
+        assert_eq!(m.len(), 2);
+        m.check_invariants().unwrap();
+    }
+
+    #[test]
+    fn crossing_with_repeated_closing_point() {
+        let mut m = map();
+        let mut ring = square(0.0, 0.0, 1.0);
+        ring.push(ring[0]);
+        let id = m.insert(MapClass::PedCrossing, &ring, 0).unwrap();
+        assert_eq!(m.get(id).unwrap().points.len(), 8);
+        // Three points of which one repeats: not a ring.
+        assert!(matches!(
+            m.insert(
+                MapClass::PedCrossing,
+                &[p(0.0, 0.0), p(1.0, 0.0), p(0.0, 0.0)],
+                0
+            ),
+            Err(GeomError::TooFewPoints { .. })
+        ));
+    }
+
+    #[test]
+    fn insert_with_id_and_remove() {
+        let mut m = map();
+        m.insert_with_id(10, MapClass::Boundary, &line(0.0, 0.0, 1.0, 1.0), 0)
+            .unwrap();
+        assert!(matches!(
+            m.insert_with_id(10, MapClass::Boundary, &line(0.0, 0.0, 1.0, 1.0), 0),
+            Err(GeomError::DuplicateId(10))
+        ));
+        assert!(m
+            .insert_with_id(u64::MAX, MapClass::Boundary, &line(0.0, 0.0, 1.0, 1.0), 0)
+            .is_err());
+        assert_eq!(
+            m.insert(MapClass::Divider, &line(0.0, 0.0, 2.0, 0.0), 1)
+                .unwrap(),
+            11
+        );
+        m.insert_with_id(3, MapClass::Divider, &line(0.0, 5.0, 2.0, 5.0), 1)
+            .unwrap();
+        assert_eq!(m.next_id(), 12);
+        assert_eq!(m.ids(), vec![3, 10, 11]);
+        assert_eq!(
+            m.instances().iter().map(|i| i.id).collect::<Vec<_>>(),
+            vec![3, 10, 11]
+        );
+        let r = m.remove(10).unwrap();
+        assert_eq!(r.id, 10);
+        assert!(matches!(m.remove(10), Err(GeomError::UnknownId(10))));
+        assert!(m.get(10).is_none());
+        assert!(!m.contains(10));
+        // Ids are never reused.
+        assert_eq!(
+            m.insert(MapClass::Divider, &line(0.0, 0.0, 2.0, 0.0), 1)
+                .unwrap(),
+            12
+        );
+        m.check_invariants().unwrap();
+        m.clear();
+        assert!(m.is_empty());
+        assert_eq!(
+            m.insert(MapClass::Divider, &line(0.0, 0.0, 2.0, 0.0), 1)
+                .unwrap(),
+            13
+        );
+        m.check_invariants().unwrap();
+    }
+
+    #[test]
+    fn bad_inputs_are_errors() {
+        let mut m = map();
+        assert!(m.insert(MapClass::Divider, &[], 0).is_err());
+        assert!(m.insert(MapClass::Divider, &[p(0.0, 0.0)], 0).is_err());
+        assert!(m
+            .insert(MapClass::Divider, &[p(0.0, 0.0), p(0.0, 0.0)], 0)
+            .is_err());
+        assert!(m
+            .insert(MapClass::Divider, &[p(0.0, 0.0), p(f64::NAN, 0.0)], 0)
+            .is_err());
+        assert!(m
+            .insert(MapClass::Divider, &[p(-1e308, 0.0), p(1e308, 0.0)], 0)
+            .is_err());
+        assert!(m
+            .insert(MapClass::PedCrossing, &[p(0.0, 0.0), p(1.0, 0.0)], 0)
+            .is_err());
+        assert!(
+            m.insert(MapClass::Divider, &[p(0.0, 0.0), p(1e12, 0.0)], 0)
+                .is_err(),
+            "too many points"
+        );
+        assert!(m.is_empty());
+        assert_eq!(m.next_id(), 0, "failed inserts do not consume ids");
+        assert!(matches!(
+            m.merge(5, &line(0.0, 0.0, 1.0, 0.0), 0),
+            Err(GeomError::UnknownId(5))
+        ));
+        let id = m
+            .insert(MapClass::Divider, &line(0.0, 0.0, 4.0, 0.0), 0)
+            .unwrap();
+        let before = m.get(id).unwrap().clone();
+        assert!(m.merge(id, &[p(0.0, 0.0)], 1).is_err());
+        assert!(m
+            .merge(id, &[p(0.0, 0.0), p(f64::INFINITY, 1.0)], 1)
+            .is_err());
+        assert_eq!(
+            m.get(id).unwrap(),
+            &before,
+            "a failed merge leaves the instance unchanged"
+        );
+        let patch = Patch {
+            pose: Pose2 {
+                x: f64::NAN,
+                y: 0.0,
+                yaw: 0.0,
+            },
+            half_extents: [1.0, 1.0].into(),
+        };
+        assert!(m.query(&patch).is_empty());
+        assert!(m.sample_patch(&patch, 20).is_err());
+        let ok = Patch::new(Pose2::new(0.0, 0.0, 0.0).unwrap(), 5.0, 5.0, 0.0).unwrap();
+        assert!(m.sample_patch(&ok, 1).is_err());
+        assert!(m.sample_patch(&ok, usize::MAX).is_err());
+        m.check_invariants().unwrap();
+    }
+
+    #[test]
+    fn from_parts_validates() {
+        let inst = |id: u64, class: MapClass, closed: bool| Instance {
+            id,
+            class,
+            points: square(0.0, 0.0, 1.0),
+            closed,
+            first_frame: 0,
+            last_frame: 1,
+            observations: 2,
+        };
+        let cfg = MapConfig::default();
+        let m = GlobalMap::from_parts(
+            cfg,
+            5,
+            vec![
+                inst(0, MapClass::PedCrossing, true),
+                inst(4, MapClass::Divider, false),
+            ],
+        )
+        .unwrap();
+        m.check_invariants().unwrap();
+        assert_eq!(m.ids(), vec![0, 4]);
+        assert!(GlobalMap::from_parts(cfg, 4, vec![inst(4, MapClass::Divider, false)]).is_err());
+        assert!(GlobalMap::from_parts(cfg, 9, vec![inst(1, MapClass::Divider, true)]).is_err());
+        assert!(matches!(
+            GlobalMap::from_parts(
+                cfg,
+                9,
+                vec![
+                    inst(1, MapClass::Divider, false),
+                    inst(1, MapClass::Boundary, false)
+                ]
+            ),
+            Err(GeomError::DuplicateId(1))
+        ));
+    }
+
+    #[test]
+    fn query_and_sample_patch() {
+        let mut m = map();
+        let a = m
+            .insert(MapClass::Divider, &line(-20.0, 1.0, 20.0, 1.0), 0)
+            .unwrap();
+        let b = m
+            .insert(MapClass::PedCrossing, &square(3.0, -3.0, 1.0), 0)
+            .unwrap();
+        let _far = m
+            .insert(MapClass::Boundary, &line(100.0, 100.0, 120.0, 100.0), 0)
+            .unwrap();
+        // Bounding box overlaps the patch but the geometry does not (diagonal away from it).
+        let _diag = m
+            .insert(MapClass::Boundary, &line(6.0, 30.0, 30.0, 6.0), 0)
+            .unwrap();
+        let pose = Pose2::new(0.0, 0.0, std::f64::consts::FRAC_PI_2).unwrap();
+        let patch = Patch::new(pose, 10.0, 10.0, 0.0).unwrap();
+        assert_eq!(m.query(&patch), vec![a, b]);
+        let s = m.sample_patch(&patch, 20).unwrap();
+        assert_eq!(s.ids, vec![a, b]);
+        assert_eq!(s.classes, vec![MapClass::Divider, MapClass::PedCrossing]);
+        assert_eq!(s.points.len(), 40);
+        assert_eq!(s.mask.len(), 40);
+        // Ego frame of a pose rotated by +90 degrees: world (x, 1) -> ego (1, -x).
+        for q in &s.points[..20] {
+            assert!(
+                (q.x - 1.0).abs() < 1e-9 && q.y.abs() <= 10.0 + 1e-9,
+                "{q:?}"
+            );
+        }
+        assert!(s.mask[..19].iter().all(|&c| c));
+        assert!(!s.mask[19], "end of an open polyline does not connect");
+        // The crossing centred at world (3, -3) lies at ego (-3, -3).
+        let c = s.points[20..]
+            .iter()
+            .fold(Point::origin(), |acc, q| acc + q.coords / 20.0);
+        assert!((c.x + 3.0).abs() < 0.2 && (c.y + 3.0).abs() < 0.2, "{c:?}");
+        assert!(s.mask[39], "a ring connects back");
+        assert!(
+            m.sample_patch(&patch, 2).is_err(),
+            "a crossing needs 3 points"
+        );
+    }
+
+    #[test]
+    fn merge_updates_bookkeeping_and_index() {
+        let mut m = map();
+        let a = m
+            .insert(MapClass::Divider, &line(0.0, 0.0, 10.0, 0.0), 2)
+            .unwrap();
+        m.merge(a, &line(5.0, 0.0, 30.0, 0.0), 5).unwrap();
+        let i = m.get(a).unwrap();
+        assert_eq!((i.first_frame, i.last_frame, i.observations), (2, 5, 2));
+        assert!(m.bbox(a).unwrap().maxs.x > 25.0);
+        let pose = Pose2::new(27.0, 0.0, 0.0).unwrap();
+        assert_eq!(m.query(&Patch::new(pose, 1.0, 1.0, 0.0).unwrap()), vec![a]);
+        let c = m
+            .insert(MapClass::PedCrossing, &square(50.0, 0.0, 1.0), 1)
+            .unwrap();
+        m.merge(c, &square(51.0, 0.0, 1.0), 0).unwrap();
+        let i = m.get(c).unwrap();
+        assert_eq!((i.first_frame, i.last_frame, i.observations), (0, 1, 2));
+        assert!(m.bbox(c).unwrap().maxs.x > 51.9);
+        m.check_invariants().unwrap();
+    }
+
+    #[derive(Debug, Clone)]
+    enum Op {
+        Insert(u8, f64, f64, f64, f64),
+        Merge(usize, f64, f64, f64, f64),
+        Remove(usize),
+    }
+
+    fn op() -> impl Strategy<Value = Op> {
+        let c = -200.0..200.0f64;
+        prop_oneof![
+            5 => (0u8..3, c.clone(), c.clone(), -15.0..15.0f64, -15.0..15.0f64)
+                .prop_map(|(k, x, y, dx, dy)| Op::Insert(k, x, y, dx, dy)),
+            3 => (any::<usize>(), -5.0..5.0f64, -5.0..5.0f64, -15.0..15.0f64, -15.0..15.0f64)
+                .prop_map(|(i, x, y, dx, dy)| Op::Merge(i, x, y, dx, dy)),
+            2 => any::<usize>().prop_map(Op::Remove),
+        ]
+    }
+
+    fn geometry(class: MapClass, x: f64, y: f64, dx: f64, dy: f64) -> Vec<Point> {
+        if class.is_closed() {
+            let h = 0.5 + dx.abs() / 4.0;
+            square(x, y, h)
+        } else {
+            vec![
+                p(x, y),
+                p(x + dx / 2.0, y + dy / 2.0 + 0.3),
+                p(x + dx + 0.5, y + dy),
+            ]
+        }
+    }
+
+    fn check_queries(
+        m: &GlobalMap,
+        queries: &[(f64, f64, f64, f64)],
+    ) -> std::result::Result<(), TestCaseError> {
+        if let Err(e) = m.check_invariants() {
+            return Err(TestCaseError::fail(e));
+        }
+        for &(x, y, w, h) in queries {
+            let q = Aabb::new(p(x, y), p(x + w, y + h));
+            let mut brute: Vec<u64> = m
+                .instances_iter()
+                .filter(|i| i.aabb().intersects(&q))
+                .map(|i| i.id)
+                .collect();
+            brute.sort_unstable();
+            prop_assert_eq!(m.query_aabb(&q), brute);
+        }
+        Ok(())
+    }
+
+    use parry2d_f64::bounding_volume::BoundingVolume;
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(48))]
+        /// The spatial index answers like brute force after random insert / merge / remove.
+        #[test]
+        fn index_matches_brute_force(ops in prop::collection::vec(op(), 1..150),
+                                     queries in prop::collection::vec(
+                                         (-220.0..220.0f64, -220.0..220.0f64, 0.0..120.0f64, 0.0..120.0f64), 6)) {
+            let mut m = map();
+            for (step, o) in ops.iter().enumerate() {
+                let ids = m.ids();
+                match *o {
+                    Op::Insert(k, x, y, dx, dy) => {
+                        let class = MapClass::ALL[k as usize];
+                        let _ = m.insert(class, &geometry(class, x, y, dx, dy), step as i64);
+                    }
+                    Op::Merge(i, x, y, dx, dy) if !ids.is_empty() => {
+                        let id = ids[i % ids.len()];
+                        let inst = m.get(id).unwrap().clone();
+                        let anchor = inst.points[inst.points.len() / 2];
+                        let det = geometry(inst.class, anchor.x + x, anchor.y + y, dx, dy);
+                        if m.merge(id, &det, step as i64).is_err() {
+                            prop_assert_eq!(m.get(id).unwrap(), &inst);
+                        }
+                    }
+                    Op::Remove(i) if !ids.is_empty() => {
+                        m.remove(ids[i % ids.len()]).unwrap();
+                    }
+                    _ => {}
+                }
+                if step % 10 == 0 {
+                    check_queries(&m, &queries)?;
+                }
+            }
+            check_queries(&m, &queries)?;
+        }
+
+        /// Arbitrary coordinates (NaN, inf, huge) give errors or a valid map, never a panic.
+        #[test]
+        fn arbitrary_floats_never_panic(xs in prop::collection::vec(prop_oneof![
+                                            4 => -1e3..1e3f64,
+                                            1 => Just(f64::NAN),
+                                            1 => Just(f64::INFINITY),
+                                            1 => Just(-f64::INFINITY),
+                                            1 => Just(1e308),
+                                            1 => any::<f64>(),
+                                        ], 0..24),
+                                        k in 0u8..3, n in 0usize..40,
+                                        pose in (any::<f64>(), any::<f64>(), any::<f64>(), any::<f64>())) {
+            let class = MapClass::ALL[k as usize];
+            let pts: Vec<Point> = xs.chunks_exact(2).map(|c| p(c[0], c[1])).collect();
+            let mut m = map();
+            let base = m.insert(class, &geometry(class, 0.0, 0.0, 5.0, 3.0), 0).unwrap();
+            let _ = m.insert(class, &pts, 1);
+            let _ = m.merge(base, &pts, 2);
+            let patch = Patch { pose: Pose2 { x: pose.0, y: pose.1, yaw: pose.2 }, half_extents: [pose.3, pose.3.abs()].into() };
+            let _ = m.query(&patch);
+            let _ = m.sample_patch(&patch, n);
+            if let Ok(patch) = Patch::new(Pose2 { x: 0.0, y: 0.0, yaw: 0.0 }, 30.0, 15.0, 1.0) {
+                let _ = m.sample_patch(&patch, n);
+            }
+            if let Err(e) = m.check_invariants() {
+                return Err(TestCaseError::fail(e));
+            }
+        }
     }
 }
