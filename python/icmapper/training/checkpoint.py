@@ -1,0 +1,66 @@
+"""Checkpoints as plain state dicts (no pickled objects): written atomically, read with
+``torch.load(..., weights_only=True)``.
+
+Content: format/version, stage, step, the network state dict, the optimizer state dict, the config
+as a plain dict and the torch RNG state.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from pathlib import Path
+from typing import Any
+
+import torch
+
+FORMAT = "icmapper-checkpoint"
+VERSION = 1
+
+
+def save_checkpoint(
+    path: str | Path,
+    *,
+    model: dict[str, torch.Tensor],
+    optimizer: dict[str, Any] | None,
+    stage: int,
+    step: int,
+    config: dict[str, Any],
+) -> None:
+    """Writes a checkpoint atomically (temp file in the same folder + os.replace)."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    blob = {
+        "format": FORMAT,
+        "version": VERSION,
+        "stage": int(stage),
+        "step": int(step),
+        "model": {k: v.detach().cpu() for k, v in model.items()},
+        "optimizer": optimizer,
+        "config": config,
+        "rng": torch.get_rng_state(),
+    }
+    fd, tmp = tempfile.mkstemp(prefix=path.name, suffix=".tmp", dir=path.parent)
+    os.close(fd)
+    try:
+        torch.save(blob, tmp)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def load_checkpoint(path: str | Path, map_location: str | torch.device = "cpu") -> dict[str, Any]:
+    """Reads a checkpoint (weights_only=True); ValueError when it is not an icmapper checkpoint."""
+    path = Path(path)
+    if not path.is_file():
+        raise OSError(f"checkpoint {path} does not exist")
+    try:
+        blob = torch.load(path, map_location=map_location, weights_only=True)
+    except Exception as exc:  # corrupt / foreign file
+        raise ValueError(f"checkpoint {path} is unreadable: {exc}") from None
+    if not isinstance(blob, dict) or blob.get("format") != FORMAT:
+        raise ValueError(f"{path} is not an icmapper checkpoint")
+    if blob.get("version") != VERSION:
+        raise ValueError(f"checkpoint {path} has version {blob.get('version')}, expected {VERSION}")
+    return blob

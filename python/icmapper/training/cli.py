@@ -1,0 +1,50 @@
+"""``icmapper train --config PATH [--stage 1|2] [--resume] [--out DIR] [--max-steps N]``.
+
+Runs under torchrun for DDP (``torchrun --nproc_per_node N -m icmapper train ...``).
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    """Adds the ``train`` command."""
+    p = subparsers.add_parser("train", help="train the networks (stage 1 or 2)")
+    p.add_argument("--config", required=True, type=Path, help="TOML config (configs/small.toml)")
+    p.add_argument("--stage", type=int, choices=(1, 2), default=1)
+    p.add_argument("--resume", action="store_true", help="continue OUT/stage{n}.pt")
+    p.add_argument("--out", type=Path, default=Path("runs/train"), help="output folder")
+    p.add_argument("--max-steps", type=int, default=None, help="stop after N steps in all")
+    p.add_argument("--init", type=Path, default=None, help="stage 2: stage-1 checkpoint")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from icmapper.training.config import load_config
+    from icmapper.training.distributed import cleanup, init_distributed
+    from icmapper.training.loop import train
+
+    if args.max_steps is not None and args.max_steps < 0:
+        raise ValueError("--max-steps must be >= 0")
+    cfg = load_config(args.config)
+    info = init_distributed()
+    try:
+        result = train(
+            cfg,
+            args.stage,
+            args.out,
+            resume=args.resume,
+            max_steps=args.max_steps,
+            init=args.init,
+            progress=not args.no_progress,
+        )
+    finally:
+        cleanup()
+    if info.is_main:
+        print(f"stage {args.stage}: {result['step']} steps; checkpoint {result['checkpoint']}")
+        if result["losses"]:
+            print("last losses: " + ", ".join(f"{k}={v:.4f}" for k, v in result["losses"].items()))
+    return 0

@@ -1,0 +1,271 @@
+"""The networks of icmapper in one module, and the two training objectives.
+
+``ICMapperNet`` holds detector, association and fusion (one state dict for checkpoints).
+``Stage1Objective``: detector + association on clips -> L_det + alpha L_trans + beta L_asso.
+``Stage2Objective``: fusion on sequences with the global map built online (Rust engine) while
+detector and association stay frozen -> lambda L_fusion.
+Both are ``nn.Module``s whose forward(batch) returns a dict of losses (``"loss"`` is the total), so
+that DDP wraps them directly.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+from torch import nn
+
+from icmapper.data.types import ego_to_world, pose_to_xy_yaw
+from icmapper.models.association import AssociationHead
+from icmapper.models.detector import DetectorOutput, DetectorState, MapDetector
+from icmapper.models.fusion import FusionModule
+from icmapper.models.losses import (
+    DetectionCriterion,
+    FrameMatch,
+    association_loss,
+    association_targets,
+    fusion_loss,
+    trans_loss,
+)
+from icmapper.models.propagation import select_topk, transform_points
+from icmapper.training.config import TrainConfig
+
+
+class ICMapperNet(nn.Module):
+    """detector (MapDetector), association (AssociationHead), fusion (FusionModule)."""
+
+    def __init__(self, cfg: TrainConfig) -> None:
+        super().__init__()
+        spec = cfg.detector_spec()
+        m = cfg.model
+        self.detector = MapDetector(spec)
+        self.association = AssociationHead(m.channels, m.num_points)
+        self.fusion = FusionModule(
+            m.channels,
+            m.num_points,
+            spec.half_x,
+            spec.half_y,
+            margin=m.fusion_margin,
+            num_layers=m.fusion_layers,
+            heads=m.heads,
+            num_classes=m.num_classes,
+            history_points=m.fusion_history_points,
+        )
+
+
+def prev_to_cur(poses: torch.Tensor, t: int) -> torch.Tensor:
+    """Ego motion previous -> current frame: poses (B, T, 4, 4) float64 ego->world -> (B, 4, 4)
+    float32 = inv(pose_t) @ pose_{t-1}."""
+    return (torch.linalg.inv(poses[:, t]) @ poses[:, t - 1]).float()
+
+
+def prepare_gt(gt: dict, detector: MapDetector, device: torch.device) -> dict:
+    """A frame's GT dict on ``device`` with 'points01' ([0, 1] of the range) added."""
+    pts = gt["points"].to(device=device, dtype=torch.float32)  # (G, P, 2)
+    if pts.numel() and not torch.isfinite(pts).all():
+        raise ValueError("ground-truth points contain NaN or inf")
+    return {
+        "ids": gt["ids"].to(device),
+        "classes": gt["classes"].to(device),
+        "points": pts,
+        "points01": detector.to_unit(pts),
+    }
+
+
+def check_batch(batch: dict) -> None:
+    """Shape checks of a collated clip batch (clear errors for bad input)."""
+    img = batch["images"]
+    if img.dim() != 6 or img.shape[3] != 3:
+        raise ValueError(f"batch images must be (B, T, C, 3, H, W), got {tuple(img.shape)}")
+    b, t, c = img.shape[:3]
+    expect = {"intrinsics": (b, t, c, 3, 3), "cam_to_ego": (b, t, c, 4, 4), "poses": (b, t, 4, 4)}
+    for key, shape in expect.items():
+        if tuple(batch[key].shape) != shape:
+            raise ValueError(f"batch {key} must be {shape}, got {tuple(batch[key].shape)}")
+    if len(batch["gt"]) != b or any(len(g) != t for g in batch["gt"]):
+        raise ValueError("batch gt must be a list (B) of lists (T)")
+
+
+class Stage1Objective(nn.Module):
+    """forward(batch) -> {'loss', 'det', 'trans', 'asso'} averaged over the clip's frames."""
+
+    def __init__(self, net: ICMapperNet, cfg: TrainConfig) -> None:
+        super().__init__()
+        s = cfg.stage1
+        self.detector = net.detector
+        self.association = net.association
+        self.criterion = DetectionCriterion(cfg.model.num_classes, s.cls_weight, s.pts_weight)
+        self.alpha, self.beta = s.alpha_trans, s.beta_asso
+        self.detach_state = s.detach_state
+
+    def association_pairs(
+        self,
+        out: DetectorOutput,
+        match: FrameMatch,
+        prev: DetectorOutput,
+        prev_match: FrameMatch,
+        motion: torch.Tensor,
+        b: int,
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        """Association logits (D, T) and GT match matrix for sample b.
+
+        Detected: the matched queries plus the unmatched among the top-k by score (ids -1);
+        tracked: the previous frame's matched queries, points moved into the current frame.
+        """
+        det = self.detector
+        q_all = out.queries.shape[1]
+        ids = torch.full((q_all,), -1, dtype=torch.int64, device=out.queries.device)
+        ids[match.pred_idx] = match.gt_ids
+        top = select_topk(out.scores()[b : b + 1].detach(), det.spec.topk)[0]  # (k,)
+        slots = torch.unique(torch.cat([match.pred_idx, top]))  # (D,)
+        trk = prev_match.pred_idx  # (T,)
+        p_det = out.points[-1][b, slots]  # (D, P, 2)
+        p_trk_m = det.to_metres(prev.points[-1][b, trk].detach())  # (T, P, 2)
+        p_trk = det.to_unit(transform_points(p_trk_m[None], motion[b : b + 1])[0])  # (T, P, 2)
+        logits = self.association(
+            out.queries[b : b + 1, slots], p_det[None], prev.queries[b : b + 1, trk], p_trk[None]
+        )[0]  # (D, T)
+        return logits, association_targets(ids[slots], prev_match.gt_ids)
+
+    def forward(self, batch: dict) -> dict[str, torch.Tensor]:
+        check_batch(batch)
+        dev = batch["images"].device
+        t_len = batch["images"].shape[1]
+        state: DetectorState | None = None
+        prev: DetectorOutput | None = None
+        prev_matches: list[FrameMatch] | None = None
+        zero = batch["images"].new_zeros((), dtype=torch.float32)
+        l_det, l_trans, l_asso = zero, zero, zero
+        n_asso = 0
+        for t in range(t_len):
+            motion = prev_to_cur(batch["poses"], t) if t > 0 else None
+            out, nxt = self.detector(
+                batch["images"][:, t],
+                batch["intrinsics"][:, t],
+                batch["cam_to_ego"][:, t],
+                state,
+                motion,
+            )
+            gts = [prepare_gt(g[t], self.detector, dev) for g in batch["gt"]]
+            det_loss, matches = self.criterion(out.logits, out.points, gts)
+            l_det = l_det + det_loss
+            if out.trans_points is not None and out.prop_src is not None and prev_matches:
+                l_trans = l_trans + trans_loss(out.trans_points, out.prop_src, prev_matches, gts)
+            if prev is not None and prev_matches is not None and motion is not None:
+                for b in range(len(gts)):
+                    logits, target = self.association_pairs(
+                        out, matches[b], prev, prev_matches[b], motion, b
+                    )
+                    l_asso = l_asso + association_loss(logits, target)
+                    n_asso += 1
+            state = nxt.detach() if self.detach_state else nxt
+            prev, prev_matches = out, matches
+        l_det = l_det / t_len
+        l_trans = l_trans / max(1, t_len - 1)
+        l_asso = l_asso / max(1, n_asso)
+        total = l_det + self.alpha * l_trans + self.beta * l_asso
+        return {"loss": total, "det": l_det, "trans": l_trans, "asso": l_asso}
+
+
+class Stage2Objective(nn.Module):
+    """forward(batch) -> {'loss', 'fusion', 'fused'}: per sample, frames in order; detections
+    above the score threshold are matched to the GT (their IDs are the GT IDs: oracle identities
+    for training), fused with the history of the same ID sampled from the online global map, and the
+    fused points (detached) merged into the map."""
+
+    def __init__(self, net: ICMapperNet, cfg: TrainConfig) -> None:
+        super().__init__()
+        self.detector = net.detector
+        self.association = net.association
+        self.fusion = net.fusion
+        self.criterion = DetectionCriterion(
+            cfg.model.num_classes, cfg.stage1.cls_weight, cfg.stage1.pts_weight
+        )
+        self.cfg = cfg
+        for mod in (self.detector, self.association):
+            mod.requires_grad_(False)
+
+    def train(self, mode: bool = True) -> Stage2Objective:
+        super().train(mode)
+        self.detector.eval()  # frozen: BatchNorm statistics stay fixed
+        self.association.eval()
+        return self
+
+    @torch.no_grad()
+    def detect(self, batch: dict) -> list[DetectorOutput]:
+        """The frozen detector over the clip: one DetectorOutput per frame."""
+        outs, state = [], None
+        for t in range(batch["images"].shape[1]):
+            motion = prev_to_cur(batch["poses"], t) if t > 0 else None
+            out, state = self.detector(
+                batch["images"][:, t],
+                batch["intrinsics"][:, t],
+                batch["cam_to_ego"][:, t],
+                state,
+                motion,
+            )
+            outs.append(out)
+        return outs
+
+    def forward(self, batch: dict) -> dict[str, torch.Tensor]:
+        from icmapper import GlobalMap  # the Rust engine
+
+        check_batch(batch)
+        cfg, det = self.cfg, self.detector
+        dev = batch["images"].device
+        r = cfg.perception_range
+        scale = torch.tensor([r.half_x, r.half_y], device=dev)
+        outs = self.detect(batch)
+        total = sum(p.sum() * 0.0 for p in self.fusion.parameters())
+        n_terms, n_fused = 0, 0
+        for b in range(batch["images"].shape[0]):
+            gmap = GlobalMap()
+            for t, out in enumerate(outs):
+                gt = prepare_gt(batch["gt"][b][t], det, dev)
+                pose = batch["poses"][b, t].cpu().numpy().astype(np.float64)
+                keep = torch.nonzero(out.scores()[b] > cfg.stage2.score_threshold).flatten()
+                if keep.numel() == 0 or gt["ids"].numel() == 0:
+                    continue
+                pi, gi, _ = self.criterion.matcher(
+                    out.logits[-1][b, keep], out.points[-1][b, keep], gt["classes"], gt["points01"]
+                )
+                slots = keep[pi]  # (M,)
+                cls = out.classes()[b, slots]  # (M,)
+                pts = det.to_metres(out.points[-1][b, slots]).float()  # (M, P, 2)
+                ids = gt["ids"][gi].tolist()
+                h_ids, _, h_pts, _ = gmap.sample_patch(
+                    pose_to_xy_yaw(pose),
+                    (r.half_x, r.half_y),
+                    margin=cfg.model.fusion_margin,
+                    n_points=cfg.model.fusion_history_points,
+                )
+                row = {int(i): j for j, i in enumerate(np.asarray(h_ids).tolist())}
+                has = torch.tensor([i in row for i in ids], dtype=torch.bool, device=dev)
+                hist = torch.zeros(len(ids), cfg.model.fusion_history_points, 2, device=dev)
+                if has.any():
+                    h_pts_t = torch.as_tensor(np.asarray(h_pts), dtype=torch.float32, device=dev)
+                    for j, i in enumerate(ids):
+                        if i in row:
+                            hist[j] = h_pts_t[row[i]]
+                fused = self.fusion(pts, cls, hist, has)  # list of (M, P, 2) metres
+                if has.any():
+                    total = total + fusion_loss(
+                        [f[has] for f in fused],
+                        gt["points"][gi][has],
+                        gt["classes"][gi][has],
+                        scale,
+                    )
+                    n_terms += 1
+                    n_fused += int(has.sum())
+                final = fused[-1].detach().cpu().numpy().astype(np.float64)  # (M, P, 2)
+                for j, i in enumerate(ids):
+                    world = ego_to_world(final[j], pose)  # (P, 2)
+                    if i in gmap:
+                        gmap.merge(i, world, frame=t)
+                    else:
+                        gmap.insert_with_id(i, int(cls[j]), world, frame=t)
+        l_fusion = total / max(1, n_terms)
+        return {
+            "loss": cfg.stage2.lambda_fusion * l_fusion,
+            "fusion": l_fusion,
+            "fused": torch.tensor(float(n_fused)),
+        }
