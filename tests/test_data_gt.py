@@ -115,7 +115,11 @@ def test_derive_ids_by_matching_recovers_identity() -> None:
     seq = _seq(np.arange(0.0, 40.0, 5.0), world)
     true = gt.sequence_gt(seq, RANGE_60x30)
     derived = gt.derive_ids_by_matching(true, seq.poses)
-    pairs = {(int(a), int(b)) for t, d in zip(true, derived) for a, b in zip(t.ids, d.ids)}
+    pairs = {
+        (int(a), int(b))
+        for t, d in zip(true, derived, strict=True)
+        for a, b in zip(t.ids, d.ids, strict=True)
+    }
     # A bijection between true and derived ids over the whole drive.
     assert len({a for a, _ in pairs}) == len(pairs) == len({b for _, b in pairs})
     with pytest.raises(ValueError):
