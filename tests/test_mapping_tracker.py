@@ -12,6 +12,7 @@ from icmapper.mapping.tracker import (
     Tracker,
     chamfer_matrix_np,
     match_scores,
+    polyline_chamfer_matrix,
     positional_affinity,
 )
 
@@ -153,3 +154,32 @@ def test_chamfer_matrix_np_against_direct_formula() -> None:
         for j in range(2):
             d = np.linalg.norm(a[i][:, None] - b[j][None], axis=2)
             assert cd[i, j] == pytest.approx(0.5 * (d.min(1).mean() + d.min(0).mean()))
+
+
+def test_polyline_chamfer_matrix_against_shapely() -> None:
+    shapely = pytest.importorskip("shapely")
+    rng = np.random.default_rng(1)
+    a = np.cumsum(rng.normal(size=(3, 6, 2)), axis=1)
+    b = np.cumsum(rng.normal(size=(4, 5, 2)), axis=1)
+    a_closed = np.array([False, True, False])
+    b_closed = np.array([True, False, False, True])
+    cd = polyline_chamfer_matrix(a, b, a_closed, b_closed)
+
+    def geom(p, closed):
+        return shapely.LinearRing(p) if closed else shapely.LineString(p)
+
+    def mean_dist(p, g):
+        return np.mean([g.distance(shapely.Point(q)) for q in p])
+
+    for i in range(3):
+        for j in range(4):
+            ga, gb = geom(a[i], a_closed[i]), geom(b[j], b_closed[j])
+            want = 0.5 * (mean_dist(a[i], gb) + mean_dist(b[j], ga))
+            assert cd[i, j] == pytest.approx(want, abs=1e-9)
+
+
+def test_positional_affinity_ignores_sampling_phase() -> None:
+    # The same 60 m line sampled at 20 points, shifted 1.5 m along itself: near-perfect affinity.
+    line = np.stack([np.linspace(-30, 30, 20), np.zeros(20)], axis=1)
+    aff = positional_affinity(line[None] + [1.5, 0.0], np.array([1]), line[None], np.array([1]))
+    assert aff[0, 0] > np.exp(-0.1)

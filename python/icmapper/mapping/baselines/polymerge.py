@@ -1,0 +1,105 @@
+"""PolyMerge-style baseline: rule-based online merging without track ids.
+
+Each detection (world frame) is compared with the global instances of its class near the ego
+(`GlobalMap.query` over the perception range enlarged by the buffer). Overlap is the larger of the
+fractions of either instance's points lying within `buffer` metres of the other
+(`splice.overlap_fraction`; crossings also count points inside). The best candidate with overlap >=
+`min_overlap` absorbs the detection: a polyline by projection splicing (`splice.splice_polyline`:
+the overlapped part replaced by the detection, the parts beyond its ends kept, so the instance
+extends), a crossing by the engine's polygon union (`GlobalMap.merge`). Otherwise the detection is
+inserted as a new instance. Detections are handled one at a time, in order, so two detections of
+one frame may merge into the same instance.
+
+`StepResult.track_ids` holds the global instance each detection went into (the method has no
+tracks; this is what it would report as identity).
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from icmapper.data.types import Frame, MapClass, PerceptionRange, RANGE_60x30
+from icmapper.mapping.baselines.common import check_threshold, new_global_map, read_frame
+from icmapper.mapping.baselines.splice import overlap_fraction, splice_polyline
+from icmapper.mapping.baselines.vma import replace_instance
+from icmapper.mapping.types import DetectionSource, StepResult
+
+if TYPE_CHECKING:
+    from icmapper._icmap import GlobalMap
+
+
+class PolyMerge:
+    """Rule-based online merging without ids (see the module docstring).
+
+    source: detections; score_threshold: detections below are ignored; buffer: overlap distance (m);
+    min_overlap: overlap fraction needed to merge; rng: perception range (for the map query);
+    smoothing / spacing: the global map's settings (crossing union, point spacing).
+    """
+
+    name = "polymerge"
+
+    def __init__(
+        self,
+        source: DetectionSource,
+        score_threshold: float = 0.3,
+        buffer: float = 1.0,
+        min_overlap: float = 0.3,
+        rng: PerceptionRange = RANGE_60x30,
+        smoothing: float = 0.5,
+        spacing: float = 1.0,
+    ) -> None:
+        if not buffer > 0:
+            raise ValueError(f"PolyMerge: buffer must be > 0 metres, got {buffer}")
+        if not 0.0 < min_overlap <= 1.0:
+            raise ValueError(f"PolyMerge: min_overlap must be in (0, 1], got {min_overlap}")
+        self.source = source
+        self.score_threshold = check_threshold(score_threshold)
+        self.buffer = float(buffer)
+        self.min_overlap = float(min_overlap)
+        self.range = rng
+        self.smoothing = float(smoothing)
+        self.spacing = float(spacing)
+        self.map: GlobalMap = new_global_map(self.smoothing, self.spacing)
+
+    def reset(self) -> None:
+        self.source.reset()
+        self.map = new_global_map(self.smoothing, self.spacing)
+
+    def step(self, frame: Frame) -> StepResult:
+        """Merges every detection of the frame into an overlapping instance or inserts it."""
+        inp = read_frame(self.source, frame, self.score_threshold)
+        dets = inp.dets
+        ids = np.full(len(dets), -1, np.int64)
+        inserted: list[int] = []
+        merged: list[int] = []
+        half = (self.range.half_x, self.range.half_y)
+        for i in range(len(dets)):
+            cls = int(dets.classes[i])
+            closed = MapClass(cls).closed
+            world = inp.world[i]  # (n, 2)
+            best, best_ov = -1, self.min_overlap - 1e-12
+            for gid in self.map.query(inp.pose_xyyaw, half, self.buffer).tolist():
+                g_cls, g_pts = self.map.get(gid)
+                if int(g_cls) != cls:
+                    continue
+                ov = overlap_fraction(world, np.asarray(g_pts, np.float64), self.buffer, closed)
+                if ov > best_ov:
+                    best, best_ov = int(gid), ov
+            if best < 0:
+                best = int(self.map.insert(cls, world, frame.index))
+                inserted.append(best)
+            else:
+                if closed:
+                    self.map.merge(best, world, frame.index)
+                else:
+                    _, stored = self.map.get(best)
+                    new = splice_polyline(np.asarray(stored, np.float64), world, self.buffer)
+                    replace_instance(self.map, best, cls, new, frame.index)
+                merged.append(best)
+            ids[i] = best
+        return StepResult(frame.index, dets, ids, dets.points.copy(), inserted, merged)
+
+    def finish(self) -> GlobalMap:
+        return self.map

@@ -1,0 +1,95 @@
+"""Post-track & VMA-merge: Post-Track ids, then VMA-style rule-based merging.
+
+Instead of IC-Mapper's curve fit, a newer observation of a track edits the stored instance:
+*substitution* — the stored points within `overlap` metres of the new observation are replaced by
+it — and *concatenation* — the stored points beyond either end of the new observation are kept and
+joined to it in order (`splice.splice_polyline`). For a crossing, the new ring replaces the stored
+one where they overlap and the stored vertices it does not cover are kept (convex hull of both;
+`splice_ring`). The edited geometry is written back with remove + insert_with_id (the engine has no
+in-place replace), so the instance keeps its id; the engine's bookkeeping (first frame, number of
+observations) restarts at the latest frame.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.spatial import ConvexHull, QhullError
+
+from icmapper.data.types import MapClass
+from icmapper.mapping.baselines.post_track import PostTrack
+from icmapper.mapping.baselines.splice import inside_ring, ring_distance, splice_polyline
+from icmapper.mapping.tracker import DEFAULT_AFFINITY_SCALE
+from icmapper.mapping.types import DetectionSource
+
+if TYPE_CHECKING:
+    from icmapper._icmap import GlobalMap
+
+
+class VmaMerge(PostTrack):
+    """Post-Track ids + substitution / concatenation merging.
+
+    overlap: distance (m) within which a stored point counts as seen again by the new observation;
+    other arguments as in PostTrack.
+    """
+
+    name = "vma_merge"
+
+    def __init__(
+        self,
+        source: DetectionSource,
+        score_threshold: float = 0.3,
+        gate: float = 1.5,
+        max_age: int = 3,
+        overlap: float = 1.0,
+        scale: float = DEFAULT_AFFINITY_SCALE,
+        smoothing: float = 0.5,
+        spacing: float = 1.0,
+    ) -> None:
+        if not overlap > 0:
+            raise ValueError(f"VmaMerge: overlap must be > 0 metres, got {overlap}")
+        super().__init__(source, score_threshold, gate, max_age, scale, smoothing, spacing)
+        self.overlap = float(overlap)
+
+    def _update(self, tid: int, cls: int, world: NDArray[np.float64], frame: int) -> bool:
+        if tid not in self.map:
+            self.map.insert_with_id(tid, cls, world, frame)
+            return False
+        _, stored = self.map.get(tid)
+        if MapClass(cls).closed:
+            new = splice_ring(np.asarray(stored, np.float64), world, self.overlap)
+        else:
+            new = splice_polyline(np.asarray(stored, np.float64), world, self.overlap)
+        replace_instance(self.map, tid, cls, new, frame)
+        return True
+
+
+def splice_ring(
+    stored: NDArray[np.float64], new: NDArray[np.float64], overlap: float
+) -> NDArray[np.float64]:
+    """Substitution / concatenation for a crossing: the new ring (q, 2) replaces the stored ring
+    (m, 2) where they overlap; stored vertices outside the new ring and farther than `overlap` from
+    it (parts not seen this time) are kept. The result is the convex hull of both sets, CCW (r, 2):
+    crossings are convex in practice, and the hull keeps the ring simple."""
+    far = (ring_distance(stored, new) > overlap) & ~inside_ring(stored, new)  # (m,)
+    pts = np.concatenate([new, stored[far]])
+    try:
+        return pts[ConvexHull(pts).vertices]
+    except QhullError:
+        return new  # degenerate (collinear) points: keep the new observation as it is
+
+
+def replace_instance(
+    gmap: GlobalMap, gid: int, cls: int, points: NDArray[np.float64], frame: int
+) -> None:
+    """Replaces the geometry of instance `gid` (remove + insert_with_id); if the engine rejects the
+    new points, the old instance is put back and the error re-raised."""
+    old_cls, old_pts = gmap.get(gid)
+    gmap.remove(gid)
+    try:
+        gmap.insert_with_id(gid, cls, points, frame)
+    except Exception:
+        gmap.insert_with_id(gid, old_cls, old_pts, frame)
+        raise
