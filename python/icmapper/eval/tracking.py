@@ -80,7 +80,7 @@ class MotAccumulator:
             dists[:, h_done] = np.nan
             if np.isfinite(dists).any():  # 2. assignment of the rest
                 rows, cols = linear_sum_assignment(_expensive(dists))
-                for i, j in zip(rows, cols):
+                for i, j in zip(rows, cols, strict=True):
                     if not np.isfinite(dists[i, j]):
                         continue
                     o, h = int(oids[i]), int(hids[j])

@@ -1,0 +1,142 @@
+"""Global-map metrics: CD per class / mCD (HDMapNet-style dense Chamfer) and GAP (numpy + scipy).
+
+CD: all instances of a class (predicted global map, ground-truth global map: world frame) are
+sampled densely, every ``step`` metres along the arc length (closed crossings along their closed
+contour), the samples of a class pooled; when a pool exceeds ``cap`` points it is subsampled
+deterministically (``cap`` evenly strided indices). CD = (mean nearest distance pred->GT + mean
+nearest distance GT->pred) / 2 (metres, lower is better). A class empty on both sides is NaN (left
+out of mCD); empty on one side only is inf. mCD = mean over classes.
+
+GAP (GlobalMapNet): Chamfer AP over global instances — the detection protocol (200-point
+resampling, nearest-GT greedy matching, VOC area AP) with each sequence's global map as one
+"frame"; an instance's score is its observation count (ties in map order).
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Sequence as Seq
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.spatial import cKDTree
+
+from icmapper.eval.chamfer import NUM_SAMPLES, resample
+from icmapper.eval.detection import CLASS_NAMES, detection_ap, mean_ignore_nan
+from icmapper.eval.instances import Instances
+
+#: Dense sampling step (metres) and per-class point cap of the CD metric.
+CD_STEP = 0.5
+CD_CAP = 200_000
+
+
+def dense_sample(points: NDArray[np.floating], closed: bool, step: float = CD_STEP) -> NDArray:
+    """(n, 2) polyline / ring -> (m, 2) float64 points every ``step`` metres by arc length
+    (m = ceil(length / step) + 1 open, ceil(length / step) closed; at least 1)."""
+    pts = np.asarray(points, dtype=np.float64)
+    ring = np.vstack([pts, pts[:1]]) if closed else pts
+    length = float(np.linalg.norm(np.diff(ring, axis=0), axis=1).sum())
+    m = int(np.ceil(length / step)) + (0 if closed else 1)
+    return resample(pts[None], max(m, 1), closed)[0]
+
+
+def _class_cloud(
+    instances: Seq[tuple[int, NDArray, bool]], c: int, step: float, cap: int
+) -> NDArray:
+    clouds = [dense_sample(p, closed, step) for cls, p, closed in instances if cls == c]
+    if not clouds:
+        return np.zeros((0, 2))
+    cloud = np.concatenate(clouds)  # (m, 2)
+    if cloud.shape[0] > cap:
+        cloud = cloud[np.linspace(0, cloud.shape[0] - 1, cap).round().astype(np.int64)]
+    return cloud
+
+
+def cloud_chamfer(a: NDArray[np.float64], b: NDArray[np.float64]) -> float:
+    """(mean nearest a->b + mean nearest b->a) / 2 of point clouds (n, 2), (m, 2)."""
+    if a.shape[0] == 0 and b.shape[0] == 0:
+        return float("nan")
+    if a.shape[0] == 0 or b.shape[0] == 0:
+        return float("inf")
+    dab, _ = cKDTree(b).query(a)
+    dba, _ = cKDTree(a).query(b)
+    return 0.5 * (float(dab.mean()) + float(dba.mean()))
+
+
+def map_cd(
+    pred: Seq[tuple[int, NDArray, bool]],
+    gt: Seq[tuple[int, NDArray, bool]],
+    step: float = CD_STEP,
+    cap: int = CD_CAP,
+) -> dict[str, float]:
+    """CD per class between one predicted and one GT global map: (cls, points (n, 2), closed)."""
+    return {
+        name: cloud_chamfer(_class_cloud(pred, c, step, cap), _class_cloud(gt, c, step, cap))
+        for c, name in enumerate(CLASS_NAMES)
+    }
+
+
+def _table(seq_instances: Seq[Seq[tuple[int, NDArray, bool, float]]]) -> Instances:
+    rows = [(s, *inst) for s, insts in enumerate(seq_instances) for inst in insts]
+    if not rows:
+        return Instances.empty(NUM_SAMPLES)
+    pts = [resample(np.asarray(r[2])[None], NUM_SAMPLES, r[3])[0] for r in rows]
+    n = len(rows)
+    return Instances(
+        np.array([r[0] for r in rows], dtype=np.int64),
+        np.zeros(n, dtype=np.int64),
+        np.array([r[1] for r in rows], dtype=np.int64),
+        np.arange(n, dtype=np.int64),
+        np.array([r[4] for r in rows], dtype=np.float64),
+        np.stack(pts),
+    )
+
+
+def global_metrics(
+    pred: Seq[Seq[tuple[int, NDArray, bool, float]]],
+    gt: Seq[Seq[tuple[int, NDArray, bool]]],
+    thresholds: tuple[float, ...],
+    step: float = CD_STEP,
+    cap: int = CD_CAP,
+) -> dict:
+    """Mapping metrics over sequences.
+
+    pred[s]: the predicted global map of sequence s as (cls, points (n, 2) world, closed, score);
+    gt[s]: its ground-truth global map as (cls, points, closed). CD per class is averaged over the
+    sequences where it is finite-or-inf (NaN left out); GAP pools all sequences.
+    Returns {"CD": {class: m}, "mCD", "GAP": {class: AP}, "mGAP", "thresholds", "step", "cap"}.
+    """
+    if len(pred) != len(gt):
+        raise ValueError(f"{len(pred)} predicted global maps for {len(gt)} sequences")
+    per_seq = [map_cd([p[:3] for p in ps], gs, step, cap) for ps, gs in zip(pred, gt, strict=True)]
+    cd = {name: mean_ignore_nan([r[name] for r in per_seq]) for name in CLASS_NAMES}
+    gt_scored = [[(*g, 1.0) for g in gs] for gs in gt]
+    ap = detection_ap(_table(pred), _table(gt_scored), thresholds)
+    return {
+        "CD": cd,
+        "mCD": mean_ignore_nan(list(cd.values())),
+        "GAP": ap["AP_class"],
+        "mGAP": ap["mAP"],
+        "thresholds": list(ap["thresholds"]),
+        "step": step,
+        "cap": cap,
+    }
+
+
+def load_global_map(path: str | os.PathLike) -> list[tuple[int, NDArray, bool, float]]:
+    """A native map file -> [(cls, points (n, 2) world, closed, score = observations)].
+
+    Needs the engine (``icmapper.GlobalMap``)."""
+    from icmapper import GlobalMap
+
+    try:
+        gm = GlobalMap.load(str(path))
+    except (OSError, ValueError) as exc:
+        raise ValueError(f"{path}: cannot load the global map ({exc})") from None
+    out = []
+    for i in gm.ids():
+        cls, pts = gm.get(int(i))
+        info = gm.info(int(i))
+        obs = info.get("observations", 1)
+        out.append((int(cls), np.asarray(pts, dtype=np.float64), int(cls) == 0, float(obs or 1)))
+    return out
