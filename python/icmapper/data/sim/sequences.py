@@ -1,0 +1,63 @@
+"""Synthetic sequences: a city, a drive through it, the nuScenes-like rig and a lazy renderer."""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+
+from icmapper.data.sim.city import CITY_SEEDS, generate_city
+from icmapper.data.sim.driver import drive
+from icmapper.data.sim.renderer import Renderer
+from icmapper.data.sim.rig import nuscenes_rig
+from icmapper.data.types import Sequence, WorldMap
+
+
+def _frame_seed(city_seed: int, drive_seed: int, i: int) -> int:
+    return int(np.random.default_rng([city_seed, drive_seed, i, 0xF5]).integers(0, 2**62))
+
+
+def sim_sequence(
+    city_seed: int,
+    drive_seed: int,
+    image_size: tuple[int, int] = (128, 352),
+    world: WorldMap | None = None,
+) -> Sequence:
+    """The drive `drive_seed` through city `city_seed` as a Sequence named "sim-<city>-<drive>"
+    (source "sim"). `render(i)` gives frame i's images (C, 3, H, W) uint8; one Renderer is made
+    per sequence and paints its world raster on the first frame. `world` lets callers pass the
+    already generated city of `city_seed` (it must be that city)."""
+    if world is None:
+        world = generate_city(city_seed)
+    timestamps, poses = drive(world, drive_seed)
+    rig = nuscenes_rig(image_size)
+    renderer = Renderer(world, rig, seed=int(np.random.default_rng([city_seed, drive_seed]).integers(2**31)))
+
+    def render(i: int) -> NDArray[np.uint8]:
+        if not -len(timestamps) <= i < len(timestamps):
+            raise IndexError(f"frame {i} out of range for {len(timestamps)} frames")
+        return renderer.render(poses[i], frame_seed=_frame_seed(city_seed, drive_seed, i), t=float(timestamps[i]))
+
+    return Sequence(f"sim-{city_seed}-{drive_seed}", "sim", world, timestamps, poses, rig, render)
+
+
+def sim_sequences(
+    split: str, num: int, seed: int = 0, image_size: tuple[int, int] = (128, 352)
+) -> list[Sequence]:
+    """`num` deterministic sequences of `split` ("train" | "val" | "test"): city seeds drawn from
+    the split's range with `seed` (without repeats while the split has enough cities), one drive
+    each (drive seed = position in the list). Each city is generated once."""
+    if split not in CITY_SEEDS:
+        raise ValueError(f"unknown split {split!r}; expected one of {sorted(CITY_SEEDS)}")
+    if num < 0:
+        raise ValueError(f"num must be >= 0, got {num}")
+    cities = CITY_SEEDS[split]
+    rng = np.random.default_rng([int(seed), 0x5E9])
+    picks = rng.choice(len(cities), size=num, replace=num > len(cities))
+    worlds: dict[int, WorldMap] = {}
+    out = []
+    for k, p in enumerate(picks):
+        city = cities[int(p)]
+        if city not in worlds:
+            worlds[city] = generate_city(city)
+        out.append(sim_sequence(city, k, image_size, world=worlds[city]))
+    return out
