@@ -1,17 +1,553 @@
 //! The native map file: versioned binary format, atomic writes.
+//!
+//! Layout (all integers and floats little-endian):
+//!
+//! ```text
+//! magic        8 bytes  b"ICMAPGM\0"
+//! version      u32      FORMAT_VERSION (1)
+//! smoothing    f64      MapConfig::smoothing
+//! spacing      f64      MapConfig::spacing
+//! next_id      u64
+//! count        u64      number of instances, then per instance (ascending id):
+//!   id           u64
+//!   class        u8     0 ped_crossing, 1 divider, 2 boundary
+//!   closed       u8     0 or 1
+//!   first_frame  i64
+//!   last_frame   i64
+//!   observations u32
+//!   n            u64    number of points
+//!   coords       n * (f64 x, f64 y)
+//! checksum     u64      FNV-1a 64 of every byte before it
+//! ```
+//!
+//! Reading checks, in order: magic, version, structure (truncation / trailing bytes), checksum,
+//! then the meaning of the values (classes, finite coordinates, unique ids ...). Every problem is a
+//! [`GeomError::Format`] naming it; a missing or unreadable file is a [`GeomError::Io`].
 
-use crate::error::Result;
-use crate::store::GlobalMap;
-use std::path::Path;
+use crate::error::{GeomError, Result};
+use crate::store::{GlobalMap, Instance, MapConfig};
+use crate::types::{MapClass, Point};
+use std::fs::{self, File, OpenOptions};
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicU64, Ordering};
+
+/// First bytes of every map file.
+pub const MAGIC: &[u8; 8] = b"ICMAPGM\0";
+/// The format version this build writes and reads.
+pub const FORMAT_VERSION: u32 = 1;
+
+/// Bytes of the header after magic and version: smoothing, spacing, next_id, count.
+const HEADER_REST: usize = 8 + 8 + 8 + 8;
+/// Bytes of an instance record without its coordinates.
+const RECORD_FIXED: usize = 8 + 1 + 1 + 8 + 8 + 4 + 8;
+
+/// FNV-1a 64-bit hash.
+pub fn fnv1a64(bytes: &[u8]) -> u64 {
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    for &b in bytes {
+        h ^= b as u64;
+        h = h.wrapping_mul(0x0000_0100_0000_01b3);
+    }
+    h
+}
+
+/// The map file contents of `map` (instances in ascending id order).
+pub fn to_bytes(map: &GlobalMap) -> Vec<u8> {
+    let instances = map.instances();
+    let n_points: usize = instances.iter().map(|i| i.points.len()).sum();
+    let mut out =
+        Vec::with_capacity(12 + HEADER_REST + instances.len() * RECORD_FIXED + n_points * 16 + 8);
+    out.extend_from_slice(MAGIC);
+    out.extend_from_slice(&FORMAT_VERSION.to_le_bytes());
+    let cfg = map.config();
+    out.extend_from_slice(&cfg.smoothing.to_le_bytes());
+    out.extend_from_slice(&cfg.spacing.to_le_bytes());
+    out.extend_from_slice(&map.next_id().to_le_bytes());
+    out.extend_from_slice(&(instances.len() as u64).to_le_bytes());
+    for inst in instances {
+        out.extend_from_slice(&inst.id.to_le_bytes());
+        out.push(inst.class.index());
+        out.push(inst.closed as u8);
+        out.extend_from_slice(&inst.first_frame.to_le_bytes());
+        out.extend_from_slice(&inst.last_frame.to_le_bytes());
+        out.extend_from_slice(&inst.observations.to_le_bytes());
+        out.extend_from_slice(&(inst.points.len() as u64).to_le_bytes());
+        for p in &inst.points {
+            out.extend_from_slice(&p.x.to_le_bytes());
+            out.extend_from_slice(&p.y.to_le_bytes());
+        }
+    }
+    let sum = fnv1a64(&out);
+    out.extend_from_slice(&sum.to_le_bytes());
+    out
+}
+
+/// Parses map file contents (see the module docs); errors name `<bytes>` as the path.
+pub fn from_bytes(bytes: &[u8]) -> Result<GlobalMap> {
+    parse(bytes, "<bytes>")
+}
 
 /// Writes `map` to `path` atomically (temp file in the same folder, fsync, rename).
 pub fn save(map: &GlobalMap, path: &Path) -> Result<()> {
-    let _ = (map, path);
-    todo!("persist.rs: save")
+    write_atomic(path, &to_bytes(map))
 }
 
 /// Reads a map file; a foreign, truncated or corrupt file gives `GeomError::Format`.
 pub fn load(path: &Path) -> Result<GlobalMap> {
-    let _ = path;
-    todo!("persist.rs: load")
+    let bytes = fs::read(path).map_err(|source| GeomError::Io {
+        path: path.display().to_string(),
+        source,
+    })?;
+    parse(&bytes, &path.display().to_string())
+}
+
+/// Writes `bytes` to `path` atomically: a temporary file in the same folder is written, fsynced and
+/// renamed over `path`; the folder is then fsynced (best effort). On error the temporary file is
+/// removed and `path` is untouched.
+pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
+    static COUNTER: AtomicU64 = AtomicU64::new(0);
+    let io_err = |p: &Path| {
+        let p = p.display().to_string();
+        move |source| GeomError::Io { path: p, source }
+    };
+    let file_name = path.file_name().ok_or_else(|| GeomError::Io {
+        path: path.display().to_string(),
+        source: std::io::Error::new(
+            std::io::ErrorKind::InvalidInput,
+            "the path has no file name",
+        ),
+    })?;
+    let dir: PathBuf = match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
+        _ => PathBuf::from("."),
+    };
+    let mut tmp_name = std::ffi::OsString::from(".");
+    tmp_name.push(file_name);
+    tmp_name.push(format!(
+        ".tmp.{}.{}",
+        std::process::id(),
+        COUNTER.fetch_add(1, Ordering::Relaxed)
+    ));
+    let tmp = dir.join(tmp_name);
+    let result = (|| {
+        let mut f = OpenOptions::new()
+            .write(true)
+            .create_new(true)
+            .open(&tmp)
+            .map_err(io_err(&tmp))?;
+        f.write_all(bytes).map_err(io_err(&tmp))?;
+        f.sync_all().map_err(io_err(&tmp))?;
+        drop(f);
+        fs::rename(&tmp, path).map_err(io_err(path))
+    })();
+    if result.is_err() {
+        let _ = fs::remove_file(&tmp);
+        return result;
+    }
+    // Make the rename durable (best effort: not every platform can open a folder).
+    if let Ok(d) = File::open(&dir) {
+        let _ = d.sync_all();
+    }
+    Ok(())
+}
+
+/// A bounds-checked little-endian reader.
+struct Reader<'a> {
+    bytes: &'a [u8],
+    pos: usize,
+}
+
+impl<'a> Reader<'a> {
+    fn take(&mut self, n: usize, what: &str) -> std::result::Result<&'a [u8], String> {
+        if self.bytes.len() - self.pos < n {
+            return Err(format!(
+                "truncated: {what} needs {n} byte(s) at offset {} but the file ends at {}",
+                self.pos,
+                self.bytes.len()
+            ));
+        }
+        let s = &self.bytes[self.pos..self.pos + n];
+        self.pos += n;
+        Ok(s)
+    }
+    fn remaining(&self) -> usize {
+        self.bytes.len() - self.pos
+    }
+    fn u8(&mut self, what: &str) -> std::result::Result<u8, String> {
+        Ok(self.take(1, what)?[0])
+    }
+    fn u32(&mut self, what: &str) -> std::result::Result<u32, String> {
+        Ok(u32::from_le_bytes(
+            self.take(4, what)?.try_into().expect("4 bytes"),
+        ))
+    }
+    fn u64(&mut self, what: &str) -> std::result::Result<u64, String> {
+        Ok(u64::from_le_bytes(
+            self.take(8, what)?.try_into().expect("8 bytes"),
+        ))
+    }
+    fn i64(&mut self, what: &str) -> std::result::Result<i64, String> {
+        Ok(i64::from_le_bytes(
+            self.take(8, what)?.try_into().expect("8 bytes"),
+        ))
+    }
+    fn f64(&mut self, what: &str) -> std::result::Result<f64, String> {
+        Ok(f64::from_le_bytes(
+            self.take(8, what)?.try_into().expect("8 bytes"),
+        ))
+    }
+}
+
+/// An instance as read, before its values are checked.
+struct RawInstance {
+    id: u64,
+    class: u8,
+    closed: u8,
+    first_frame: i64,
+    last_frame: i64,
+    observations: u32,
+    points: Vec<Point>,
+}
+
+fn parse(bytes: &[u8], path: &str) -> Result<GlobalMap> {
+    let fmt = |reason: String| GeomError::Format {
+        path: path.to_string(),
+        reason,
+    };
+    // Magic: a short file that starts like a map file is truncated, anything else is foreign.
+    let head = &bytes[..bytes.len().min(MAGIC.len())];
+    if head != &MAGIC[..head.len()] || (head.is_empty() && !bytes.is_empty()) {
+        return Err(fmt("not an icmapper map file (wrong magic bytes)".into()));
+    }
+    if bytes.is_empty() {
+        return Err(fmt("not an icmapper map file (empty file)".into()));
+    }
+    let mut r = Reader { bytes, pos: 0 };
+    r.take(MAGIC.len(), "magic").map_err(fmt)?;
+    let version = r.u32("format version").map_err(fmt)?;
+    if version != FORMAT_VERSION {
+        return Err(fmt(format!(
+            "unsupported format version {version} (this build reads version {FORMAT_VERSION}; the file may come from a newer icmapper)"
+        )));
+    }
+    // Structure: everything up to the checksum must be present.
+    let (smoothing, spacing, next_id, raw) = (|| -> std::result::Result<_, String> {
+        let smoothing = r.f64("smoothing")?;
+        let spacing = r.f64("spacing")?;
+        let next_id = r.u64("next_id")?;
+        let count = r.u64("instance count")?;
+        if count > (r.remaining() / RECORD_FIXED) as u64 {
+            return Err(format!(
+                "truncated or corrupt: {count} instances declared but only {} bytes remain",
+                r.remaining()
+            ));
+        }
+        let mut raw = Vec::with_capacity(count as usize);
+        for k in 0..count {
+            let id = r.u64("instance id")?;
+            let class = r.u8("class")?;
+            let closed = r.u8("closed flag")?;
+            let first_frame = r.i64("first_frame")?;
+            let last_frame = r.i64("last_frame")?;
+            let observations = r.u32("observations")?;
+            let n = r.u64("point count")?;
+            if n > (r.remaining() / 16) as u64 {
+                return Err(format!(
+                    "truncated or corrupt: instance #{k} (id {id}) declares {n} points but only {} bytes remain",
+                    r.remaining()
+                ));
+            }
+            let mut points = Vec::with_capacity(n as usize);
+            for _ in 0..n {
+                let x = r.f64("coordinate")?;
+                let y = r.f64("coordinate")?;
+                points.push(Point::new(x, y));
+            }
+            raw.push(RawInstance { id, class, closed, first_frame, last_frame, observations, points });
+        }
+        Ok((smoothing, spacing, next_id, raw))
+    })()
+    .map_err(fmt)?;
+    let body_end = r.pos;
+    let stored = r.u64("checksum").map_err(fmt)?;
+    if r.remaining() != 0 {
+        return Err(fmt(format!(
+            "{} unexpected trailing byte(s) after the checksum",
+            r.remaining()
+        )));
+    }
+    let computed = fnv1a64(&bytes[..body_end]);
+    if stored != computed {
+        return Err(fmt(format!("checksum mismatch (stored {stored:#018x}, computed {computed:#018x}): the file is corrupt")));
+    }
+    // Meaning of the values.
+    let config = MapConfig { smoothing, spacing };
+    config
+        .validate()
+        .map_err(|e| fmt(format!("bad config: {e}")))?;
+    let mut instances = Vec::with_capacity(raw.len());
+    for ri in raw {
+        let class = MapClass::try_from(ri.class as i64)
+            .map_err(|_| fmt(format!("invalid class {} for instance {}", ri.class, ri.id)))?;
+        let closed = match ri.closed {
+            0 => false,
+            1 => true,
+            v => {
+                return Err(fmt(format!(
+                    "invalid closed flag {v} for instance {}",
+                    ri.id
+                )))
+            }
+        };
+        if ri
+            .points
+            .iter()
+            .any(|p| !(p.x.is_finite() && p.y.is_finite()))
+        {
+            return Err(fmt(format!("non-finite coordinate in instance {}", ri.id)));
+        }
+        instances.push(Instance {
+            id: ri.id,
+            class,
+            points: ri.points,
+            closed,
+            first_frame: ri.first_frame,
+            last_frame: ri.last_frame,
+            observations: ri.observations,
+        });
+    }
+    GlobalMap::from_parts(config, next_id, instances).map_err(|e| fmt(e.to_string()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    fn p(x: f64, y: f64) -> Point {
+        Point::new(x, y)
+    }
+
+    /// A map built from stored parts (no dependency on resampling), with a gap in the ids.
+    fn sample_map() -> GlobalMap {
+        let cfg = MapConfig {
+            smoothing: 0.25,
+            spacing: 0.75,
+        };
+        let instances = vec![
+            Instance {
+                id: 0,
+                class: MapClass::PedCrossing,
+                points: vec![p(0.0, 0.0), p(2.0, 0.0), p(2.0, 1.5), p(0.0, 1.5)],
+                closed: true,
+                first_frame: -3,
+                last_frame: 7,
+                observations: 4,
+            },
+            Instance {
+                id: 5,
+                class: MapClass::Divider,
+                points: vec![p(10.0, -1.0), p(11.0, -1.25), p(12.5, -1.0)],
+                closed: false,
+                first_frame: 2,
+                last_frame: 2,
+                observations: 1,
+            },
+            Instance {
+                id: 2,
+                class: MapClass::Boundary,
+                points: vec![p(-1e6, 3.0), p(1e6, 3.0 + f64::EPSILON)],
+                closed: false,
+                first_frame: i64::MIN,
+                last_frame: i64::MAX,
+                observations: u32::MAX,
+            },
+        ];
+        GlobalMap::from_parts(cfg, 9, instances).unwrap()
+    }
+
+    fn same(a: &GlobalMap, b: &GlobalMap) {
+        assert_eq!(a.config(), b.config());
+        assert_eq!(a.next_id(), b.next_id());
+        assert_eq!(a.instances(), b.instances());
+        b.check_invariants().unwrap();
+    }
+
+    fn reason(e: GeomError) -> String {
+        match e {
+            GeomError::Format { reason, .. } => reason,
+            other => panic!("expected a Format error, got {other:?}"),
+        }
+    }
+
+    #[test]
+    fn fnv_known_values() {
+        assert_eq!(fnv1a64(b""), 0xcbf29ce484222325);
+        assert_eq!(fnv1a64(b"a"), 0xaf63dc4c8601ec8c);
+        assert_eq!(fnv1a64(b"foobar"), 0x85944171f73967e8);
+    }
+
+    #[test]
+    fn bytes_round_trip() {
+        let m = sample_map();
+        let bytes = to_bytes(&m);
+        let back = from_bytes(&bytes).unwrap();
+        same(&m, &back);
+        assert_eq!(to_bytes(&back), bytes, "deterministic bytes");
+        let empty = GlobalMap::new(MapConfig::default()).unwrap();
+        same(&empty, &from_bytes(&to_bytes(&empty)).unwrap());
+    }
+
+    #[test]
+    fn file_round_trip_and_atomic_overwrite() {
+        let dir = std::env::temp_dir().join(format!("icmap-persist-{}", std::process::id()));
+        fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("map.icmap");
+        let m = sample_map();
+        save(&m, &path).unwrap();
+        same(&m, &load(&path).unwrap());
+        // Overwrite with a different map; no temporary files are left behind.
+        let empty = GlobalMap::new(MapConfig::default()).unwrap();
+        save(&empty, &path).unwrap();
+        assert!(load(&path).unwrap().is_empty());
+        let names: Vec<_> = fs::read_dir(&dir)
+            .unwrap()
+            .map(|e| e.unwrap().file_name())
+            .collect();
+        assert_eq!(names, vec![std::ffi::OsString::from("map.icmap")]);
+        // Missing file -> Io; a folder as target -> Io.
+        assert!(matches!(
+            load(&dir.join("missing.icmap")),
+            Err(GeomError::Io { .. })
+        ));
+        assert!(matches!(save(&m, &dir), Err(GeomError::Io { .. })));
+        assert!(matches!(
+            save(&m, &dir.join("no/such/dir/map.icmap")),
+            Err(GeomError::Io { .. })
+        ));
+        fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn wrong_magic_and_version() {
+        let bytes = to_bytes(&sample_map());
+        let mut b = bytes.clone();
+        b[0] = b'X';
+        assert!(reason(from_bytes(&b).unwrap_err()).contains("not an icmapper map file"));
+        assert!(
+            reason(from_bytes(b"{\"type\": \"FeatureCollection\"}").unwrap_err())
+                .contains("not an icmapper")
+        );
+        assert!(reason(from_bytes(b"").unwrap_err()).contains("not an icmapper"));
+        let mut b = bytes.clone();
+        b[8..12].copy_from_slice(&2u32.to_le_bytes());
+        assert!(reason(from_bytes(&b).unwrap_err()).contains("unsupported format version 2"));
+    }
+
+    #[test]
+    fn truncation_is_detected() {
+        let bytes = to_bytes(&sample_map());
+        for cut in 0..bytes.len() {
+            let msg = reason(from_bytes(&bytes[..cut]).unwrap_err());
+            assert!(
+                msg.contains("truncated") || msg.contains("empty file"),
+                "cut {cut}: {msg}"
+            );
+        }
+        let mut longer = bytes.clone();
+        longer.push(0);
+        assert!(reason(from_bytes(&longer).unwrap_err()).contains("trailing"));
+    }
+
+    #[test]
+    fn every_flipped_byte_is_detected() {
+        let bytes = to_bytes(&sample_map());
+        for i in 0..bytes.len() {
+            for bit in [0u8, 3, 7] {
+                let mut b = bytes.clone();
+                b[i] ^= 1 << bit;
+                assert!(
+                    matches!(from_bytes(&b), Err(GeomError::Format { .. })),
+                    "byte {i} bit {bit}"
+                );
+            }
+        }
+    }
+
+    /// Rewrites the checksum after an edit, so that the value checks are reached.
+    fn reseal(b: &mut [u8]) {
+        let n = b.len() - 8;
+        let sum = fnv1a64(&b[..n]);
+        b[n..].copy_from_slice(&sum.to_le_bytes());
+    }
+
+    #[test]
+    fn invalid_values_with_valid_checksum() {
+        let bytes = to_bytes(&sample_map());
+        // First record starts after magic, version and the header; class at +8, first x at +46.
+        let rec = 12 + HEADER_REST;
+        let mut b = bytes.clone();
+        b[rec + 8] = 7;
+        reseal(&mut b);
+        assert!(reason(from_bytes(&b).unwrap_err()).contains("invalid class 7"));
+        let mut b = bytes.clone();
+        b[rec + 9] = 0; // a crossing that claims to be open
+        reseal(&mut b);
+        assert!(matches!(from_bytes(&b), Err(GeomError::Format { .. })));
+        let mut b = bytes.clone();
+        let x0 = rec + RECORD_FIXED;
+        b[x0..x0 + 8].copy_from_slice(&f64::NAN.to_le_bytes());
+        reseal(&mut b);
+        assert!(reason(from_bytes(&b).unwrap_err()).contains("non-finite"));
+        let mut b = bytes.clone();
+        b[20..28].copy_from_slice(&(-1.0f64).to_le_bytes()); // spacing
+        reseal(&mut b);
+        assert!(reason(from_bytes(&b).unwrap_err()).contains("spacing"));
+        let mut b = bytes.clone();
+        b[28..36].copy_from_slice(&1u64.to_le_bytes()); // next_id below the ids
+        reseal(&mut b);
+        assert!(reason(from_bytes(&b).unwrap_err()).contains("next_id"));
+        let mut b = bytes;
+        b[36..44].copy_from_slice(&u64::MAX.to_le_bytes()); // absurd count: no huge allocation
+        reseal(&mut b);
+        assert!(reason(from_bytes(&b).unwrap_err()).contains("instances declared"));
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(64))]
+        #[test]
+        fn arbitrary_bytes_never_panic(mut b in prop::collection::vec(any::<u8>(), 0..300), keep_header in any::<bool>()) {
+            if keep_header && b.len() >= 12 {
+                b[..8].copy_from_slice(MAGIC);
+                b[8..12].copy_from_slice(&FORMAT_VERSION.to_le_bytes());
+                if b.len() >= 20 {
+                    reseal(&mut b);
+                }
+            }
+            let _ = from_bytes(&b);
+        }
+
+        #[test]
+        fn round_trip_random_maps(insts in prop::collection::vec(
+            (0u8..3, prop::collection::vec((-1e5..1e5f64, -1e5..1e5f64), 3..30), -100i64..100, 0i64..50, 1u32..1000), 0..20)) {
+            let instances: Vec<Instance> = insts.into_iter().enumerate().map(|(k, (c, pts, f, d, o))| {
+                let class = MapClass::ALL[c as usize];
+                Instance {
+                    id: (k as u64) * 3,
+                    class,
+                    points: pts.into_iter().map(|(x, y)| p(x, y)).collect(),
+                    closed: class.is_closed(),
+                    first_frame: f,
+                    last_frame: f + d,
+                    observations: o,
+                }
+            }).collect();
+            let next = instances.len() as u64 * 3 + 1;
+            let m = GlobalMap::from_parts(MapConfig::default(), next, instances).unwrap();
+            let back = from_bytes(&to_bytes(&m)).unwrap();
+            prop_assert_eq!(m.instances(), back.instances());
+            prop_assert_eq!(m.next_id(), back.next_id());
+        }
+    }
 }
