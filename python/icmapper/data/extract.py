@@ -197,7 +197,7 @@ def subsample_indices(timestamps: NDArray[np.float64], hz: float) -> NDArray[np.
     if hz <= 0 or not np.isfinite(hz):
         raise ValueError(f"hz must be positive, got {hz}")
     t = np.asarray(timestamps, dtype=np.float64)
-    targets = np.arange(t[0], t[-1] + 0.5 / hz, 1.0 / hz)  # (k,)
+    targets = np.arange(t[0], t[-1] + 1e-9, 1.0 / hz)  # (k,) never past the last pose
     idx = np.clip(np.searchsorted(t, targets), 1, len(t) - 1)
     left_closer = (targets - t[idx - 1]) <= (t[idx] - targets)
     idx = np.where(left_closer, idx - 1, idx)
