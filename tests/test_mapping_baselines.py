@@ -24,7 +24,7 @@ LINES = {  # id: (class, y, x0, x1) in road coordinates
     1: (2, -7.0, -40.0, 140.0),  # boundaries
     2: (2, 7.0, -40.0, 140.0),
     3: (1, 0.0, -40.0, 140.0),  # dividers; the second ends inside the visited stretch
-    4: (1, 3.5, 20.0, 80.0),
+    4: (1, 3.75, 20.0, 80.0),
 }
 CROSSING = (5, 48.0, 52.0, -6.0, 6.0)  # id, x0, x1, y0, y1 (road coordinates)
 
@@ -179,7 +179,7 @@ def test_splice_substitutes_and_concatenates() -> None:
 def test_baseline_map_matches_ground_truth(name: str) -> None:
     """With "low" oracle noise (0.1 m jitter, 5 % drops, 5 % partial views), every class of the
     map lies within 0.6 m (mean Chamfer, both directions) of the GT global map: a few times the
-    jitter, well under half the 3.5 m lane spacing, so missing, misplaced or spurious instances
+    jitter, well under half the 3.75 m lane spacing, so missing, misplaced or spurious instances
     fail. With exact detections the bound is 0.25 m (resampling, curve fit, ends)."""
     _engine_ready()
     seq, gt = _sequence()

@@ -106,16 +106,21 @@ def _mean_point_to_segments(
 ) -> NDArray[np.float64]:
     """p (A, n, 2), seg (B, m, 2, 2) -> (A, B): mean over each p's points of the distance to the
     nearest segment of each seg set."""
-    s0 = seg[:, :, 0]  # (B, m, 2)
-    d = seg[:, :, 1] - s0  # (B, m, 2)
-    dd = np.maximum(np.einsum("bmk,bmk->bm", d, d), 1e-18)  # (B, m)
-    out = np.empty((p.shape[0], seg.shape[0]), np.float64)
-    for i in range(p.shape[0]):  # row by row keeps memory at B*n*m
-        rel = p[i][None, :, None, :] - s0[:, None, :, :]  # (B, n, m, 2)
-        t = np.clip(np.einsum("bnmk,bmk->bnm", rel, d) / dd[:, None, :], 0.0, 1.0)  # (B, n, m)
-        off = rel - t[..., None] * d[:, None, :, :]  # (B, n, m, 2)
-        dist = np.sqrt(np.einsum("bnmk,bnmk->bnm", off, off)).min(axis=2)  # (B, n)
-        out[i] = dist.mean(axis=1)
+    num_b, m = seg.shape[:2]
+    n = p.shape[1]
+    sx, sy = seg[None, :, None, :, 0, 0], seg[None, :, None, :, 0, 1]  # (1, B, 1, m)
+    dx = seg[None, :, None, :, 1, 0] - sx  # (1, B, 1, m)
+    dy = seg[None, :, None, :, 1, 1] - sy
+    dd = np.maximum(dx * dx + dy * dy, 1e-18)  # (1, B, 1, m)
+    out = np.empty((p.shape[0], num_b), np.float64)
+    rows = max(1, 2_000_000 // max(1, num_b * n * m))  # chunk of A: about 2M pairs at a time
+    for r0 in range(0, p.shape[0], rows):
+        px = p[r0 : r0 + rows, None, :, None, 0]  # (a, 1, n, 1)
+        py = p[r0 : r0 + rows, None, :, None, 1]
+        rx, ry = px - sx, py - sy  # (a, B, n, m)
+        t = np.clip((rx * dx + ry * dy) / dd, 0.0, 1.0)  # (a, B, n, m)
+        ox, oy = rx - t * dx, ry - t * dy  # (a, B, n, m)
+        out[r0 : r0 + rows] = np.sqrt((ox * ox + oy * oy).min(axis=3)).mean(axis=2)  # (a, B)
     return out
 
 
@@ -144,9 +149,13 @@ def positional_affinity(
             f"positional_affinity: points {det_points.shape} / classes {det_classes.shape}, "
             f"points {trk_points.shape} / classes {trk_classes.shape} disagree"
         )
-    cd = polyline_chamfer_matrix(det_points, trk_points, det_classes == 0, trk_classes == 0)
-    same = det_classes[:, None] == trk_classes[None, :]  # (k, t)
-    return np.where(same, np.exp(-cd / scale), 0.0)  # (k, t)
+    aff = np.zeros((det_classes.shape[0], trk_classes.shape[0]), np.float64)  # (k, t)
+    for c in np.intersect1d(det_classes, trk_classes):  # only same-class pairs are computed
+        di, ti = np.nonzero(det_classes == c)[0], np.nonzero(trk_classes == c)[0]
+        closed = np.full(len(di), c == 0), np.full(len(ti), c == 0)
+        cd = polyline_chamfer_matrix(det_points[di], trk_points[ti], *closed)  # (k_c, t_c)
+        aff[np.ix_(di, ti)] = np.exp(-cd / scale)
+    return aff
 
 
 def match_scores(
