@@ -101,9 +101,10 @@ class MapDecoder(nn.Module):
         self.reg_heads = nn.ModuleList(
             [mlp(channels, channels, num_points * 2) for _ in range(n_reg)]
         )
-        for head in self.reg_heads:  # start from the reference points
-            nn.init.zeros_(head[-1].weight)
-            nn.init.zeros_(head[-1].bias)
+        with torch.no_grad():  # start close to the reference points (small, not zero: grads flow)
+            for head in self.reg_heads:
+                head[-1].weight.mul_(0.01)
+                nn.init.zeros_(head[-1].bias)
         for head in self.cls_heads:  # focal-loss prior: p = 0.01
             nn.init.constant_(head.bias, -4.595)
 

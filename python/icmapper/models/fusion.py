@@ -73,8 +73,9 @@ class FusionModule(nn.Module):
         self.cls_embed = nn.Embedding(num_classes, channels)
         self.layers = nn.ModuleList([FusionLayer(channels, heads) for _ in range(num_layers)])
         self.reg = mlp(channels, channels, 2)  # shared regression head
-        nn.init.zeros_(self.reg[-1].weight)
-        nn.init.zeros_(self.reg[-1].bias)
+        with torch.no_grad():  # start near the identity (small, not zero: gradients flow)
+            self.reg[-1].weight.mul_(0.01)
+            nn.init.zeros_(self.reg[-1].bias)
 
     def forward(
         self,

@@ -43,6 +43,7 @@ def run(args: argparse.Namespace) -> int:
         )
     finally:
         cleanup()
+    print(f"rank {info.rank}/{info.world_size}: parameter digest {result['param_digest']}")
     if info.is_main:
         print(f"stage {args.stage}: {result['step']} steps; checkpoint {result['checkpoint']}")
         if result["losses"]:

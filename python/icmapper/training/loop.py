@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import contextlib
 import csv
+import hashlib
 import math
 import os
 import random
@@ -28,6 +29,15 @@ from icmapper.training.config import TrainConfig, config_to_dict
 from icmapper.training.distributed import DistInfo, barrier, init_distributed, mean_over_ranks
 from icmapper.training.objectives import ICMapperNet, Stage1Objective, Stage2Objective
 from icmapper.training.synthetic import SyntheticClips, collate_clips
+
+
+def param_digest(module: torch.nn.Module) -> str:
+    """SHA-256 of all parameters' bytes in name order (replica identity checks)."""
+    h = hashlib.sha256()
+    for name, p in sorted(module.named_parameters()):
+        h.update(name.encode())
+        h.update(p.detach().cpu().contiguous().numpy().tobytes())
+    return h.hexdigest()
 
 
 def seed_everything(seed: int) -> None:
@@ -163,7 +173,9 @@ def train(
     dataset: tuple[Dataset, Any] | None = None,
     progress: bool = True,
 ) -> dict[str, Any]:
-    """Runs one training stage; returns {'step', 'losses' (last logged means), 'checkpoint'}.
+    """Runs one training stage.
+
+    Returns {'step', 'losses' (last logged means), 'checkpoint', 'param_digest' (this rank's)}.
 
     stage 2 starts from ``init`` (default OUT/stage1.pt) unless it resumes its own checkpoint.
     ``dataset`` (dataset, collate) overrides ``cfg.data.source``.
@@ -194,8 +206,9 @@ def train(
     base_lr = s1.lr if stage == 1 else s1.lr * cfg.stage2.lr_scale
     warmup = s1.warmup_steps if stage == 1 else cfg.stage2.warmup_steps
     total = s1.steps if stage == 1 else cfg.stage2.steps
+    horizon = total  # the schedule always spans the configured steps
     if max_steps is not None:
-        total = min(total, max_steps)
+        total = min(total, max_steps)  # stop early; resuming continues the same schedule
     opt = torch.optim.AdamW(params, lr=base_lr, weight_decay=s1.weight_decay)
     if opt_state is not None:
         opt.load_state_dict(opt_state)
@@ -226,7 +239,7 @@ def train(
     for step, batch in batches:
         if step >= total:
             break
-        lr = lr_at(step, base_lr, warmup, total)
+        lr = lr_at(step, base_lr, warmup, horizon)
         for group in opt.param_groups:
             group["lr"] = lr
         batch = to_device(batch, info.device)
@@ -269,7 +282,12 @@ def train(
         bar.close()
     if log is not None:
         log.close()
-    return {"step": max(step, start), "losses": last, "checkpoint": str(ckpt_path)}
+    return {
+        "step": max(step, start),
+        "losses": last,
+        "checkpoint": str(ckpt_path),
+        "param_digest": param_digest(net),
+    }
 
 
 def env_summary() -> str:

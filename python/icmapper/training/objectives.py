@@ -10,6 +10,9 @@ that DDP wraps them directly.
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from typing import Any
+
 import numpy as np
 import torch
 from torch import nn
@@ -172,11 +175,14 @@ class Stage2Objective(nn.Module):
     for training), fused with the history of the same ID sampled from the online global map, and the
     fused points (detached) merged into the map."""
 
-    def __init__(self, net: ICMapperNet, cfg: TrainConfig) -> None:
+    def __init__(
+        self, net: ICMapperNet, cfg: TrainConfig, map_factory: Callable[[], Any] | None = None
+    ) -> None:
         super().__init__()
         self.detector = net.detector
         self.association = net.association
         self.fusion = net.fusion
+        self.map_factory = map_factory  # default: icmapper.GlobalMap (the Rust engine)
         self.criterion = DetectionCriterion(
             cfg.model.num_classes, cfg.stage1.cls_weight, cfg.stage1.pts_weight
         )
@@ -207,8 +213,10 @@ class Stage2Objective(nn.Module):
         return outs
 
     def forward(self, batch: dict) -> dict[str, torch.Tensor]:
-        from icmapper import GlobalMap  # the Rust engine
+        if self.map_factory is None:
+            from icmapper import GlobalMap  # the Rust engine
 
+            self.map_factory = GlobalMap
         check_batch(batch)
         cfg, det = self.cfg, self.detector
         dev = batch["images"].device
@@ -218,7 +226,7 @@ class Stage2Objective(nn.Module):
         total = sum(p.sum() * 0.0 for p in self.fusion.parameters())
         n_terms, n_fused = 0, 0
         for b in range(batch["images"].shape[0]):
-            gmap = GlobalMap()
+            gmap = self.map_factory()
             for t, out in enumerate(outs):
                 gt = prepare_gt(batch["gt"][b][t], det, dev)
                 pose = batch["poses"][b, t].cpu().numpy().astype(np.float64)
