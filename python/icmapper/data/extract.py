@@ -106,8 +106,16 @@ def overlaps(a: NDArray[np.float64], b: NDArray[np.float64]) -> bool:
     pad = 2 * OVERLAP_BUFFER
     if np.any(lo_s > hi_o + pad) or np.any(lo_o > hi_s + pad):
         return False
+    # Only the segments of `other` near the shorter line matter.
+    seg_lo = np.minimum(other[:-1], other[1:])  # (k, 2)
+    seg_hi = np.maximum(other[:-1], other[1:])  # (k, 2)
+    near = np.all(seg_lo <= hi_s + pad, axis=1) & np.all(seg_hi >= lo_s - pad, axis=1)  # (k,)
+    if not near.any():
+        return False
     dense, ds = densify(short, 0.1)
-    d = point_to_polyline_distance(dense, other)  # (m,)
+    d = np.full(len(dense), np.inf)  # (m,)
+    for k in np.nonzero(near)[0]:
+        d = np.minimum(d, point_to_polyline_distance(dense, other[k : k + 2]))
     area = float(np.maximum(0.0, 2 * OVERLAP_BUFFER - d).sum() * ds)
     return area > OVERLAP_RATIO * min(la, lb)
 
