@@ -160,7 +160,7 @@ pub fn resample_spacing(points: &[Point], spacing: f64, closed: bool) -> Result<
     let total = polyline_length(points, closed);
     check_length(total)?;
     let segments = (total / spacing).ceil();
-    if !(segments < MAX_RESAMPLE_POINTS as f64) {
+    if !segments.is_finite() || segments >= MAX_RESAMPLE_POINTS as f64 {
         return Err(GeomError::InvalidParameter {
             name: "spacing",
             reason: format!(
