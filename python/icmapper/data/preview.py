@@ -12,14 +12,20 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from icmapper.data.types import RANGE_60x30, MapClass, PerceptionRange, Sequence, world_to_ego
+from icmapper.data.types import MapClass, PerceptionRange, RANGE_60x30, Sequence, world_to_ego
 
-CLASS_COLOURS = {MapClass.PED_CROSSING: "tab:blue", MapClass.DIVIDER: "tab:orange", MapClass.BOUNDARY: "tab:green"}
+CLASS_COLOURS = {
+    MapClass.PED_CROSSING: "tab:blue",
+    MapClass.DIVIDER: "tab:orange",
+    MapClass.BOUNDARY: "tab:green",
+}
 _FRONT = ("CAM_FRONT_LEFT", "CAM_FRONT", "CAM_FRONT_RIGHT")
 _BACK = ("CAM_BACK_LEFT", "CAM_BACK", "CAM_BACK_RIGHT")
 
 
-def _bev_instances(seq: Sequence, pose: NDArray, rng: PerceptionRange) -> list[tuple[int, int, NDArray, bool]]:
+def _bev_instances(
+    seq: Sequence, pose: NDArray, rng: PerceptionRange
+) -> list[tuple[int, int, NDArray, bool]]:
     """(id, class, ego points (n, 2), closed) of the frame's ground truth: gt.frame_gt when the
     gt module is available, else the world instances near the ego (clipped by the plot limits)."""
     try:
@@ -35,10 +41,13 @@ def _bev_instances(seq: Sequence, pose: NDArray, rng: PerceptionRange) -> list[t
             ]
         except BaseException as exc:  # the geometry engine may still be a stub (a pyo3 panic)
             if isinstance(exc, (KeyboardInterrupt, SystemExit)) or not (
-                isinstance(exc, (NotImplementedError, RuntimeError)) or type(exc).__name__ == "PanicException"
+                isinstance(exc, (NotImplementedError, RuntimeError))
+                or type(exc).__name__ == "PanicException"
             ):
                 raise
-            warnings.warn(f"gt.frame_gt unavailable ({exc}); drawing world instances instead", stacklevel=3)
+            warnings.warn(
+                f"gt.frame_gt unavailable ({exc}); drawing world instances instead", stacklevel=3
+            )
     out = []
     reach = np.hypot(rng.half_x, rng.half_y) + 5.0
     for m in seq.world.instances:
@@ -51,9 +60,12 @@ def _bev_instances(seq: Sequence, pose: NDArray, rng: PerceptionRange) -> list[t
 
 
 def preview_png(
-    sequence: Sequence, frame_index: int, out_path: str | os.PathLike[str], rng: PerceptionRange = RANGE_60x30
+    sequence: Sequence,
+    frame_index: int,
+    out_path: str | os.PathLike[str],
+    rng: PerceptionRange = RANGE_60x30,
 ) -> Path:
-    """Writes the preview of frame `frame_index` of `sequence` to `out_path` (PNG). Returns the path.
+    """Writes the preview of frame `frame_index` of `sequence` to `out_path` (PNG); returns it.
 
     Raises ValueError when the sequence has no images or lacks the six nuScenes cameras, and
     IndexError for a frame out of range.
@@ -92,15 +104,26 @@ def preview_png(
         inside = (np.abs(pts[:, 0]) <= rng.half_x) & (np.abs(pts[:, 1]) <= rng.half_y)
         if np.any(inside):
             k = np.flatnonzero(inside)[len(np.flatnonzero(inside)) // 2]
-            ax.text(-pts[k, 1], pts[k, 0], str(iid), fontsize=6, color=colour, ha="center", va="center",
-                    bbox={"boxstyle": "round,pad=0.1", "fc": "white", "ec": "none", "alpha": 0.7})
+            ax.text(
+                -pts[k, 1],
+                pts[k, 0],
+                str(iid),
+                fontsize=6,
+                color=colour,
+                ha="center",
+                va="center",
+                bbox={"boxstyle": "round,pad=0.1", "fc": "white", "ec": "none", "alpha": 0.7},
+            )
     ax.add_patch(plt.Rectangle((-0.95, -2.4), 1.9, 4.8, color="k"))  # the ego (about 4.8 m x 1.9 m)
     ax.set_xlim(-rng.half_y, rng.half_y)
     ax.set_ylim(-rng.half_x, rng.half_x)
     ax.set_aspect("equal")
     ax.set_title(f"{sequence.name} frame {frame.index}  BEV GT {rng.name} m", fontsize=8)
     ax.tick_params(labelsize=6)
-    handles = [plt.Line2D([], [], color=c, label=MapClass(k).name.lower()) for k, c in CLASS_COLOURS.items()]
+    handles = [
+        plt.Line2D([], [], color=c, label=MapClass(k).name.lower())
+        for k, c in CLASS_COLOURS.items()
+    ]
     ax.legend(handles=handles, fontsize=6, loc="lower right")
     out = Path(out_path)
     out.parent.mkdir(parents=True, exist_ok=True)

@@ -197,7 +197,9 @@ def generate_city(seed: int) -> WorldMap:
     pieces: list[Polygon] = []
 
     def add(cls: MapClass, pts: NDArray, style: str, closed: bool = False) -> None:
-        instances.append(MapInstance(len(instances) + 1, cls, np.asarray(pts, np.float64), closed, style))
+        instances.append(
+            MapInstance(len(instances) + 1, cls, np.asarray(pts, np.float64), closed, style)
+        )
 
     crossings: list[NDArray[np.float64]] = []
     for st in streets:
@@ -232,7 +234,11 @@ def generate_city(seed: int) -> WorldMap:
             for k in range(1, n_lanes):
                 off = side * (st.median / 2 + k * st.width)
                 for s0, s1 in spans:
-                    add(MapClass.DIVIDER, offset_curve(sub_curve(st.curve, s0, s1, 1.0), off), st.lane_style)
+                    add(
+                        MapClass.DIVIDER,
+                        offset_curve(sub_curve(st.curve, s0, s1, 1.0), off),
+                        st.lane_style,
+                    )
         # Drivable pieces of the street body (split in two where a median cuts a hole).
         body = st.body()
         if st.median > 0.0:
@@ -241,7 +247,9 @@ def generate_city(seed: int) -> WorldMap:
             t = st.at(length / 2 + 1.0, 0.0) - mid
             t /= np.linalg.norm(t)
             nrm = np.array([-t[1], t[0]]) * (st.hw_left + st.hw_right + 5.0)
-            pieces.extend(_polygons(split(body.difference(cut), LineString([mid - nrm, mid + nrm]))))
+            pieces.extend(
+                _polygons(split(body.difference(cut), LineString([mid - nrm, mid + nrm])))
+            )
         else:
             pieces.append(body)
     for ring in crossings:
@@ -249,6 +257,7 @@ def generate_city(seed: int) -> WorldMap:
 
     # Junction pieces: rounded kerbs by closing the meeting arm bodies near the node.
     all_islands = unary_union(islands) if islands else None
+    lanes, corridors = _lane_graph(streets, arms, radius)
     for n, ks in arms.items():
         hw = max(max(streets[k].hw_left, streets[k].hw_right) for k in ks)
         r_clip = float(np.hypot(radius[n], hw)) + 1.0
@@ -260,7 +269,9 @@ def generate_city(seed: int) -> WorldMap:
             left, right = (st.hw_left, st.hw_right) if n == st.a else (st.hw_right, st.hw_left)
             caps += [nodes[n] + left * nrm, nodes[n] - right * nrm]
         hull = shapely.MultiPoint(np.array(caps)).convex_hull
-        shape = unary_union([streets[k].body().intersection(local) for k in ks] + [hull])
+        shape = unary_union(
+            [streets[k].body().intersection(local) for k in ks] + [hull] + corridors[n]
+        )
         closed = shape.buffer(corner_r, quad_segs=8).buffer(-corner_r, quad_segs=8)
         junction = closed.intersection(Point(nodes[n]).buffer(r_clip, quad_segs=16))
         if all_islands is not None:
@@ -279,7 +290,6 @@ def generate_city(seed: int) -> WorldMap:
             add(MapClass.BOUNDARY, pts, "curb")
 
     drivable = [np.asarray(p.exterior.coords, np.float64)[:-1] for p in pieces if p.area > 0.5]
-    lanes = _lane_graph(streets, arms, radius, nodes)
     return WorldMap(f"sim-city-{seed}", instances, drivable, lanes)
 
 
@@ -297,7 +307,14 @@ def _spans(s0: float, s1: float, gaps: list[tuple[float, float]]) -> list[tuple[
 
 def _crossing_ring(st: _Street, s0: float, s1: float) -> NDArray[np.float64]:
     """Closed ring (4, 2) of a crossing over the full street width between arc lengths s0 < s1."""
-    return np.array([st.at(s0, -st.hw_right), st.at(s1, -st.hw_right), st.at(s1, st.hw_left), st.at(s0, st.hw_left)])
+    return np.array(
+        [
+            st.at(s0, -st.hw_right),
+            st.at(s1, -st.hw_right),
+            st.at(s1, st.hw_left),
+            st.at(s0, st.hw_left),
+        ]
+    )
 
 
 def _polygons(geom: shapely.Geometry) -> list[Polygon]:
@@ -310,11 +327,15 @@ def _polygons(geom: shapely.Geometry) -> list[Polygon]:
 
 
 def _lane_graph(
-    streets: list[_Street], arms: dict[int, list[int]], radius: NDArray, nodes: NDArray
-) -> dict[int, LaneSegment]:
-    """Street lanes between junctions plus connector lanes through each junction."""
+    streets: list[_Street], arms: dict[int, list[int]], radius: NDArray
+) -> tuple[dict[int, LaneSegment], dict[int, list[Polygon]]]:
+    """Street lanes between junctions plus connector lanes through each junction. Returns the
+    lanes and, per node, the corridors (lane polygons) of its connectors."""
     lanes: dict[int, LaneSegment] = {}
-    incoming: dict[int, list[tuple[int, int, int, int]]] = {n: [] for n in arms}  # lane, street, k, n
+    corridors: dict[int, list[Polygon]] = {n: [] for n in arms}
+    incoming: dict[int, list[tuple[int, int, int, int]]] = {
+        n: [] for n in arms
+    }  # lane, street, k, n
     outgoing: dict[int, list[tuple[int, int, int, int]]] = {n: [] for n in arms}
     for si, st in enumerate(streets):
         s_a, s_b = radius[st.a], st.length - radius[st.b]
@@ -343,7 +364,7 @@ def _lane_graph(
                 options.append((oid, so, ko, n_out, delta))
             other_streets = {o[1] for o in options}
             chosen = []
-            for oid, so, ko, n_out, delta in options:
+            for oid, _so, ko, n_out, delta in options:
                 target = min(k, n_out - 1)
                 if len(other_streets) == 1 or abs(delta) < np.deg2rad(40):
                     ok = ko == target
@@ -359,10 +380,14 @@ def _lane_graph(
             succ = []
             for oid in chosen:
                 cid = len(lanes)
-                lanes[cid] = LaneSegment(cid, _connector(cl_in, lanes[oid].centerline), (oid,), lanes[lid].width)
+                cl = _connector(cl_in, lanes[oid].centerline)
+                lanes[cid] = LaneSegment(cid, cl, (oid,), lanes[lid].width)
+                corridors[n].append(
+                    LineString(cl).buffer(lanes[lid].width / 2 + 0.3, cap_style="flat")
+                )
                 succ.append(cid)
             lanes[lid].successors = tuple(succ)
-    return lanes
+    return lanes, corridors
 
 
 def _heading(p: NDArray, q: NDArray) -> float:

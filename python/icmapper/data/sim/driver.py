@@ -66,7 +66,9 @@ def drive(
     behind = resample_by_length(path, np.maximum(s_key - 1.0, 0.0))  # (T, 2)
     d = ahead - behind
     yaw = np.arctan2(d[:, 1], d[:, 0])  # (T,)
-    poses = np.stack([xy_yaw_to_pose(float(x), float(y), float(a)) for (x, y), a in zip(xy, yaw, strict=True)])
+    poses = np.stack(
+        [xy_yaw_to_pose(float(x), float(y), float(a)) for (x, y), a in zip(xy, yaw, strict=True)]
+    )
     return times, poses
 
 
@@ -78,7 +80,9 @@ def _speed_profile(rng: np.random.Generator, t_end: float):  # noqa: ANN202 (sma
     phases = rng.uniform(0.0, 2 * np.pi, size=3)
 
     def v(t: NDArray) -> NDArray:
-        w = base + np.sum(amps[:, None] * np.sin(2 * np.pi * t[None] / periods[:, None] + phases[:, None]), axis=0)
+        w = base + np.sum(
+            amps[:, None] * np.sin(2 * np.pi * t[None] / periods[:, None] + phases[:, None]), axis=0
+        )
         return np.clip(w, MIN_SPEED, MAX_SPEED)
 
     return v
@@ -94,7 +98,9 @@ def _curvature(path: NDArray) -> NDArray[np.float64]:
     return np.convolve(k, np.ones(5) / 5, mode="same")
 
 
-def _route(lanes: dict[int, LaneSegment], rng: np.random.Generator, need: float) -> NDArray[np.float64]:
+def _route(
+    lanes: dict[int, LaneSegment], rng: np.random.Generator, need: float
+) -> NDArray[np.float64]:
     """A random walk along successors from a random point of a random lane, resampled at 0.5 m,
     at least `need` metres long. Raises ValueError if no start gives a long enough route."""
     ids = sorted(lanes)

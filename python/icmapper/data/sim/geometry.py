@@ -29,7 +29,7 @@ def arc_length(points: NDArray) -> NDArray[np.float64]:
 
 
 def resample_by_length(points: NDArray, s_new: NDArray) -> NDArray[np.float64]:
-    """Points of the (n, 2) polyline at arc lengths s_new (m,) (clamped to the ends). Returns (m, 2)."""
+    """Points (m, 2) of the (n, 2) polyline at arc lengths s_new (m,), clamped to the ends."""
     s = arc_length(points)
     return np.stack([np.interp(s_new, s, points[:, 0]), np.interp(s_new, s, points[:, 1])], axis=1)
 

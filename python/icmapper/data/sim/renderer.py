@@ -90,8 +90,8 @@ class Renderer:
             raise TypeError(f"rig must be a CameraRig, got {type(rig).__name__}")
         if not (resolution > 0 and np.isfinite(resolution)):
             raise ValueError(f"resolution must be positive, got {resolution}")
-        c = rig.num_cameras
-        if rig.intrinsics.shape != (c, 3, 3) or rig.cam_to_ego.shape != (c, 4, 4):
+        n_cam = rig.num_cameras
+        if rig.intrinsics.shape != (n_cam, 3, 3) or rig.cam_to_ego.shape != (n_cam, 4, 4):
             raise ValueError("rig intrinsics must be (C, 3, 3) and cam_to_ego (C, 4, 4)")
         self.world, self.rig, self.seed = world, rig, int(seed)
         self.resolution, self.max_raster_pixels = float(resolution), int(max_raster_pixels)
@@ -99,7 +99,9 @@ class Renderer:
         self._palette(rng)
         self._cast_rays()
         self._noise = _value_noise(rng, _NOISE)  # (N, N) float32 in about [-1, 1]
-        self._grain = rng.standard_normal(2 * c * 3 * rig.image_size[0] * rig.image_size[1]).astype(np.float32)
+        self._grain = rng.standard_normal(
+            2 * n_cam * 3 * rig.image_size[0] * rig.image_size[1]
+        ).astype(np.float32)
         self._vehicles = _make_vehicles(world, rng)
         self._raster: _Raster | None = None
 
@@ -130,7 +132,6 @@ class Renderer:
     def _cast_rays(self) -> None:
         rig = self.rig
         h, w = rig.image_size
-        c = rig.num_cameras
         u, v = np.meshgrid(np.arange(w) + 0.5, np.arange(h) + 0.5)  # (H, W) each
         pix = np.stack([u, v, np.ones_like(u)], axis=-1)  # (H, W, 3)
         k_inv = np.linalg.inv(rig.intrinsics)  # (C, 3, 3)
@@ -144,8 +145,12 @@ class Renderer:
         lam = np.where(down, -o[:, 2, None, None] / np.where(down, dz, -1.0), np.inf)  # (C, H, W)
         dist = lam * np.linalg.norm(d, axis=-1)  # (C, H, W)
         ground = dist < _MAX_DEPTH
-        hit = o[:, None, None, :2] + np.where(ground, lam, 0.0)[..., None] * d[..., :2]  # (C, H, W, 2)
-        self._dirs = d.astype(np.float32)  # (C, H, W, 3)
+        hit = (
+            o[:, None, None, :2] + np.where(ground, lam, 0.0)[..., None] * d[..., :2]
+        )  # (C, H, W, 2)
+        self._dir_planes = np.ascontiguousarray(d.transpose(0, 3, 1, 2)).astype(
+            np.float32
+        )  # (C, 3, H, W)
         self._origins = o  # (C, 3)
         self._depth = np.where(ground, lam, np.inf).astype(np.float32)  # (C, H, W) ray parameter
         self._hit_full = hit.astype(np.float32)  # (C, H, W, 2) ego frame
@@ -155,13 +160,17 @@ class Renderer:
         self._fog = fog.astype(np.float32)[:, None]  # (N, 1)
         elev = dz / np.linalg.norm(d, axis=-1)  # (C, H, W) sine of elevation
         a = np.clip(elev * 3.0, 0.0, 1.0)[..., None]  # (C, H, W, 1)
-        self._background = ((1 - a) * self._horizon + a * self._zenith).astype(np.float32)  # (C, H, W, 3)
+        self._background = ((1 - a) * self._horizon + a * self._zenith).astype(
+            np.float32
+        )  # (C, H, W, 3)
 
     # ----------------------------------------------------------------- raster
     def _ensure_raster(self) -> _Raster:
         key = id(self)
         if self._raster is None:
-            self._raster = _paint_world(self.world, self.resolution, self.max_raster_pixels, self.seed)
+            self._raster = _paint_world(
+                self.world, self.resolution, self.max_raster_pixels, self.seed
+            )
             _built[key] = weakref.ref(self)
             while len(_built) > _KEEP_RASTERS:
                 _, ref = _built.popitem(last=False)
@@ -194,10 +203,11 @@ class Renderer:
         cy, sy = np.float32(np.cos(yaw)), np.float32(np.sin(yaw))
         inv = np.float32(1.0 / r.res)
         hx, hy = self._hit[:, 0], self._hit[:, 1]  # (N,)
-        col_f = (cy * hx - sy * hy + np.float32(x - r.x0)) * inv  # (N,) raster column
-        row_f = (sy * hx + cy * hy + np.float32(y - r.y0)) * inv  # (N,) raster row
-        ix = col_f.astype(np.int32)
-        iy = row_f.astype(np.int32)
+        # +0.5: the painter puts coordinate k at the centre of raster pixel k (nearest pixel).
+        col_f = (cy * hx - sy * hy + np.float32(x - r.x0 + 0.5 * r.res)) * inv  # (N,) raster column
+        row_f = (sy * hx + cy * hy + np.float32(y - r.y0 + 0.5 * r.res)) * inv  # (N,) raster row
+        ix = np.floor(col_f).astype(np.int32)
+        iy = np.floor(row_f).astype(np.int32)
         hr, wr = r.labels.shape
         outside = (ix < 0) | (ix >= wr) | (iy < 0) | (iy >= hr)
         np.clip(ix, 0, wr - 1, out=ix)
@@ -214,8 +224,12 @@ class Renderer:
         self._draw_vehicles(img, x, y, yaw, t)
 
         # Camera effects: exposure / white balance, blur, sensor noise.
-        rng = np.random.default_rng([self.seed, 0 if frame_seed is None else int(frame_seed) + 1, 0xF2])
-        gain = np.exp(rng.normal(0.0, 0.12)) * np.exp(rng.normal(0.0, 0.04, size=(c, 1, 1, 1)))  # (C,1,1,1)
+        rng = np.random.default_rng(
+            [self.seed, 0 if frame_seed is None else int(frame_seed) + 1, 0xF2]
+        )
+        gain = np.exp(rng.normal(0.0, 0.12)) * np.exp(
+            rng.normal(0.0, 0.04, size=(c, 1, 1, 1))
+        )  # (C,1,1,1)
         gain = gain * np.exp(rng.normal(0.0, 0.03, size=(1, 1, 1, 3)))  # (C, 1, 1, 3)
         img *= gain.astype(np.float32)
         a = np.float32(rng.uniform(0.1, 0.6))
@@ -228,7 +242,9 @@ class Renderer:
         out = np.clip(img, 0.0, 255.0).astype(np.uint8)  # (C, H, W, 3)
         return np.ascontiguousarray(out.transpose(0, 3, 1, 2))  # (C, 3, H, W)
 
-    def _draw_vehicles(self, img: NDArray[np.float32], x: float, y: float, yaw: float, t: float) -> None:
+    def _draw_vehicles(
+        self, img: NDArray[np.float32], x: float, y: float, yaw: float, t: float
+    ) -> None:
         """Ray/box intersection of nearby vehicles into img (C, H, W, 3) in place, with shadows."""
         veh = self._vehicles
         if veh.centre.shape[0] == 0:
@@ -244,9 +260,11 @@ class Renderer:
                     vyaw[i] = np.arctan2(p[1, 1] - p[0, 1], p[1, 0] - p[0, 0])
         c, s_ = np.cos(yaw), np.sin(yaw)
         rel = centre - np.array([x, y])  # (n, 2)
-        ego_xy = np.stack([c * rel[:, 0] + s_ * rel[:, 1], -s_ * rel[:, 0] + c * rel[:, 1]], axis=1)  # (n, 2)
+        ego_xy = np.stack(
+            [c * rel[:, 0] + s_ * rel[:, 1], -s_ * rel[:, 0] + c * rel[:, 1]], axis=1
+        )  # (n, 2)
         dist = np.linalg.norm(ego_xy, axis=1)
-        near = np.flatnonzero((dist > 7.0) & (dist < 80.0))
+        near = np.flatnonzero((dist > 7.0) & (dist < 70.0))
         h, w = self.rig.image_size
         ego_to_cam = np.linalg.inv(self.rig.cam_to_ego)  # (C, 4, 4)
         for i in near[np.argsort(-dist[near])]:
@@ -255,24 +273,36 @@ class Renderer:
             rot = np.array([[cb, -sb, 0.0], [sb, cb, 0.0], [0.0, 0.0, 1.0]])  # box -> ego
             ln, wd, ht = veh.size[i]
             corners = np.array(
-                [[sx * (ln / 2 + 0.3), sy * (wd / 2 + 0.3), z] for sx in (-1, 1) for sy in (-1, 1) for z in (0.0, ht)]
+                [
+                    [sx * (ln / 2 + 0.3), sy * (wd / 2 + 0.3), z]
+                    for sx in (-1, 1)
+                    for sy in (-1, 1)
+                    for z in (0.0, ht)
+                ]
             )  # (8, 3) box frame (with the shadow margin)
             pts = corners @ rot.T + np.array([ego_xy[i, 0], ego_xy[i, 1], 0.0])  # (8, 3) ego
-            cam = np.einsum("cij,nj->cni", ego_to_cam[:, :3, :3], pts) + ego_to_cam[:, None, :3, 3]  # (C, 8, 3)
+            cam = (
+                np.einsum("cij,nj->cni", ego_to_cam[:, :3, :3], pts) + ego_to_cam[:, None, :3, 3]
+            )  # (C, 8, 3)
             for ci in range(self.rig.num_cameras):
-                z = cam[ci, :, 2]
-                if np.all(z <= 0.1):
+                vis = _near_clipped(cam[ci])  # (m, 3) corners / edge cuts in front of the camera
+                if vis.shape[0] == 0:
                     continue
-                if np.any(z <= 0.1):
-                    u0, u1, v0, v1 = 0, w, 0, h
-                else:
-                    uv = (self.rig.intrinsics[ci] @ cam[ci].T).T
-                    uv = uv[:, :2] / uv[:, 2:3]
-                    u0, v0 = np.maximum(np.floor(uv.min(axis=0)).astype(int), 0)
-                    u1, v1 = np.minimum(np.ceil(uv.max(axis=0)).astype(int) + 1, [w, h])
-                    if u0 >= u1 or v0 >= v1:
-                        continue
-                self._box_pass(img[ci, v0:v1, u0:u1], ci, (v0, v1, u0, u1), rot, ego_xy[i], veh.size[i], veh.colour[i])
+                uv = vis @ self.rig.intrinsics[ci].T
+                uv = uv[:, :2] / uv[:, 2:3]
+                u0, v0 = np.maximum(np.floor(uv.min(axis=0)).astype(int), 0)
+                u1, v1 = np.minimum(np.ceil(uv.max(axis=0)).astype(int) + 1, [w, h])
+                if u0 >= u1 or v0 >= v1:
+                    continue
+                self._box_pass(
+                    img[ci, v0:v1, u0:u1],
+                    ci,
+                    (v0, v1, u0, u1),
+                    rot,
+                    ego_xy[i],
+                    veh.size[i],
+                    veh.colour[i],
+                )
 
     def _box_pass(
         self,
@@ -287,36 +317,68 @@ class Renderer:
         """Shadow and body of one box in one camera window `tile` (h, w, 3), in place."""
         v0, v1, u0, u1 = win
         ln, wd, ht = (float(v) for v in size)
+        c, s = np.float32(rot[0, 0]), np.float32(rot[1, 0])
         # Shadow on the ground hits inside the (slightly enlarged) footprint.
-        g = self._hit_full[ci, v0:v1, u0:u1] - centre.astype(np.float32)  # (h, w, 2)
-        gx = g[..., 0] * rot[0, 0] + g[..., 1] * rot[1, 0]  # box frame
-        gy = g[..., 0] * rot[0, 1] + g[..., 1] * rot[1, 1]
-        ground = np.isfinite(self._depth[ci, v0:v1, u0:u1])
-        shadow = ground & (np.abs(gx) < ln / 2 + 0.25) & (np.abs(gy) < wd / 2 + 0.25)
+        hit = self._hit_full[ci, v0:v1, u0:u1]  # (h, w, 2) ego frame
+        gx0 = hit[..., 0] - np.float32(centre[0])
+        gy0 = hit[..., 1] - np.float32(centre[1])
+        depth = self._depth[ci, v0:v1, u0:u1]  # (h, w), inf off the ground
+        shadow = (np.abs(c * gx0 + s * gy0) < ln / 2 + 0.25) & (
+            np.abs(-s * gx0 + c * gy0) < wd / 2 + 0.25
+        )
+        shadow &= depth < np.inf
         tile[shadow] *= 0.45
-        # Body: slab test in the box frame.
-        d = self._dirs[ci, v0:v1, u0:u1] @ rot.astype(np.float32)  # (h, w, 3) box frame (rot^T d)
+        # Body: slab test in the box frame (rays rotated by rot^T).
+        dxe, dye, dz = (
+            self._dir_planes[ci, 0, v0:v1, u0:u1],
+            self._dir_planes[ci, 1, v0:v1, u0:u1],
+            self._dir_planes[ci, 2, v0:v1, u0:u1],
+        )
+        dx = c * dxe + s * dye  # (h, w)
+        dy = -s * dxe + c * dye
         o = (self._origins[ci] - np.array([centre[0], centre[1], 0.0])) @ rot  # (3,) box frame
-        lo = np.array([-ln / 2, -wd / 2, 0.0], np.float32)
-        hi = np.array([ln / 2, wd / 2, ht], np.float32)
         with np.errstate(divide="ignore", invalid="ignore"):
-            inv = 1.0 / np.where(np.abs(d) < 1e-9, 1e-9, d)
-            t1 = (lo - o.astype(np.float32)) * inv  # (h, w, 3)
-            t2 = (hi - o.astype(np.float32)) * inv
-        tmin = np.minimum(t1, t2)
-        tnear = tmin.max(axis=-1)  # (h, w)
-        tfar = np.maximum(t1, t2).min(axis=-1)
-        hit = (tnear < tfar) & (tnear > 0) & (tnear < self._depth[ci, v0:v1, u0:u1])
-        if not np.any(hit):
+            tx1, tx2 = (-ln / 2 - o[0]) / dx, (ln / 2 - o[0]) / dx
+            ty1, ty2 = (-wd / 2 - o[1]) / dy, (wd / 2 - o[1]) / dy
+            tz1, tz2 = (0.0 - o[2]) / dz, (ht - o[2]) / dz
+        nx, ny, nz = np.minimum(tx1, tx2), np.minimum(ty1, ty2), np.minimum(tz1, tz2)
+        tnear = np.maximum(np.maximum(nx, ny), nz)  # (h, w)
+        tfar = np.minimum(
+            np.minimum(np.maximum(tx1, tx2), np.maximum(ty1, ty2)), np.maximum(tz1, tz2)
+        )
+        body = (tnear < tfar) & (tnear > 0) & (tnear < depth)
+        if not np.any(body):
             return
-        face = tmin.argmax(axis=-1)  # 0 ends, 1 sides, 2 roof
-        zhit = o[2] + tnear * d[..., 2]  # (h, w) hit height
-        shade = np.array([0.72, 0.9, 1.12], np.float32)[face]
-        col = colour[None, None, :] * shade[..., None]  # (h, w, 3)
-        glass = (face < 2) & (zhit > 0.55 * ht) & (zhit < 0.93 * ht)
+        tn = tnear[body]
+        shade = np.where(tn == nz[body], 1.12, np.where(tn == ny[body], 0.9, 0.72)).astype(
+            np.float32
+        )  # (k,)
+        zhit = o[2] + tn * dz[body]  # (k,) hit height
+        col = colour[None, :] * shade[:, None]  # (k, 3)
+        glass = (tn != nz[body]) & (zhit > 0.55 * ht) & (zhit < 0.93 * ht)
         col[glass] = np.array([38, 46, 56], np.float32)
         col[zhit < 0.3] *= 0.35
-        tile[hit] = col[hit]
+        tile[body] = col
+
+
+_BOX_EDGES = np.array(
+    [(0, 1), (2, 3), (4, 5), (6, 7), (0, 2), (1, 3), (4, 6), (5, 7), (0, 4), (1, 5), (2, 6), (3, 7)]
+)  # the 12 edges of a box whose corners are ordered (sx, sy, z) as in _draw_vehicles
+
+
+def _near_clipped(cam: NDArray, near: float = 0.1) -> NDArray[np.float64]:
+    """Corners (8, 3) of a box in camera coordinates clipped to z >= near: the corners in front
+    plus the points where edges cross the near plane. Returns (m, 3)."""
+    z = cam[:, 2]
+    front = cam[z >= near]
+    if front.shape[0] == 8 or front.shape[0] == 0:
+        return front
+    a, b = cam[_BOX_EDGES[:, 0]], cam[_BOX_EDGES[:, 1]]  # (12, 3)
+    za, zb = a[:, 2], b[:, 2]
+    cross = (za - near) * (zb - near) < 0
+    t = (near - za[cross]) / (zb[cross] - za[cross])
+    cuts = a[cross] + t[:, None] * (b[cross] - a[cross])
+    return np.concatenate([front, cuts])
 
 
 def _value_noise(rng: np.random.Generator, n: int) -> NDArray[np.float32]:
@@ -330,7 +392,9 @@ def _value_noise(rng: np.random.Generator, n: int) -> NDArray[np.float32]:
         if rep > 1:
             k = rep
             for ax in (0, 1):
-                cs = np.cumsum(np.concatenate([up, up.take(np.arange(k), axis=ax)], axis=ax), axis=ax)
+                cs = np.cumsum(
+                    np.concatenate([up, up.take(np.arange(k), axis=ax)], axis=ax), axis=ax
+                )
                 up = (cs.take(np.arange(k, n + k), axis=ax) - cs.take(np.arange(0, n), axis=ax)) / k
         out += weight * up
     return out / np.abs(out).max()
@@ -421,7 +485,14 @@ def _zebra_bars(ring: NDArray) -> list[NDArray[np.float64]]:
     bars = []
     for a in np.arange(0.25, length - 0.25, 1.0):
         p0 = rect[0] + a * u
-        bar = Polygon([p0 - 0.05 * short_e, p0 + 0.5 * u - 0.05 * short_e, p0 + 0.5 * u + 1.05 * short_e, p0 + 1.05 * short_e])
+        bar = Polygon(
+            [
+                p0 - 0.05 * short_e,
+                p0 + 0.5 * u - 0.05 * short_e,
+                p0 + 0.5 * u + 1.05 * short_e,
+                p0 + 1.05 * short_e,
+            ]
+        )
         piece = bar.intersection(poly).buffer(-0.05)
         for g in getattr(piece, "geoms", [piece]):
             if isinstance(g, Polygon) and not g.is_empty:
@@ -433,9 +504,15 @@ def _make_vehicles(world: WorldMap, rng: np.random.Generator) -> _Vehicles:
     """Parked vehicles along kerbs (on the drivable side) and vehicles driving along lanes."""
     centres, yaws, sizes, cols, lanes, s0, speed = [], [], [], [], [], [], []
     drivable = [shapely.Polygon(p) for p in world.drivable if len(p) >= 3]
-    area = shapely.union_all([p if p.is_valid else p.buffer(0) for p in drivable]) if drivable else None
+    area = (
+        shapely.union_all([p if p.is_valid else p.buffer(0) for p in drivable])
+        if drivable
+        else None
+    )
 
-    def car(centre: NDArray, yaw: float, lane: NDArray | None = None, s: float = 0.0, v: float = 0.0) -> None:
+    def car(
+        centre: NDArray, yaw: float, lane: NDArray | None = None, s: float = 0.0, v: float = 0.0
+    ) -> None:
         kind = rng.random()
         size = [rng.uniform(4.2, 5.0), rng.uniform(1.75, 1.95), rng.uniform(1.4, 1.7)]
         if kind > 0.85:  # vans / trucks
@@ -465,14 +542,20 @@ def _make_vehicles(world: WorldMap, rng: np.random.Generator) -> _Vehicles:
                 nrm = np.array([-t[1], t[0]])
                 for side in (1.0, -1.0):
                     cand = p + side * 1.15 * nrm
-                    if area.contains(shapely.Point(cand)) and area.contains(shapely.Point(p + side * 3.0 * nrm)):
+                    if area.contains(shapely.Point(cand)) and area.contains(
+                        shapely.Point(p + side * 3.0 * nrm)
+                    ):
                         car(cand, float(np.arctan2(t[1], t[0])))
                         break
     lane_list = [np.asarray(lane.centerline, np.float64) for _, lane in sorted(world.lanes.items())]
-    lane_list = [cl for cl in lane_list if cl.ndim == 2 and len(cl) >= 2 and arc_length(cl)[-1] > 30.0]
+    lane_list = [
+        cl for cl in lane_list if cl.ndim == 2 and len(cl) >= 2 and arc_length(cl)[-1] > 30.0
+    ]
     for k in rng.permutation(len(lane_list))[: max(1, len(lane_list) // 6)] if lane_list else []:
         cl = lane_list[int(k)]
-        car(cl[0], 0.0, cl, float(rng.uniform(0, arc_length(cl)[-1])), float(rng.uniform(4.0, 12.0)))
+        car(
+            cl[0], 0.0, cl, float(rng.uniform(0, arc_length(cl)[-1])), float(rng.uniform(4.0, 12.0))
+        )
     n = len(centres)
     return _Vehicles(
         np.array(centres, np.float64).reshape(n, 2),

@@ -7,7 +7,7 @@ import numpy as np
 
 from icmapper.data.types import CameraRig
 
-#: name, (x, y, z) mount in the ego frame (m), yaw (deg, ego frame, left positive), horizontal FOV (deg)
+#: name, (x, y, z) mount in the ego frame (m), yaw (deg, left positive), horizontal FOV (deg)
 NUSCENES_LAYOUT: tuple[tuple[str, tuple[float, float, float], float, float], ...] = (
     ("CAM_FRONT", (1.70, 0.00, 1.51), 0.0, 70.0),
     ("CAM_FRONT_RIGHT", (1.55, -0.49, 1.49), -55.0, 70.0),
@@ -62,7 +62,9 @@ def project_ego_points(rig: CameraRig, points: np.ndarray) -> tuple[np.ndarray, 
     if pts.ndim != 2 or pts.shape[1] != 3:
         raise ValueError(f"points must have shape (n, 3), got {pts.shape}")
     ego_to_cam = np.linalg.inv(rig.cam_to_ego)  # (C, 4, 4)
-    cam = np.einsum("cij,nj->cni", ego_to_cam[:, :3, :3], pts) + ego_to_cam[:, None, :3, 3]  # (C, n, 3)
+    cam = (
+        np.einsum("cij,nj->cni", ego_to_cam[:, :3, :3], pts) + ego_to_cam[:, None, :3, 3]
+    )  # (C, n, 3)
     z = cam[..., 2]  # (C, n)
     pix = np.einsum("cij,cnj->cni", rig.intrinsics, cam)  # (C, n, 3)
     uv = pix[..., :2] / np.where(np.abs(z) < 1e-9, 1e-9, z)[..., None]  # (C, n, 2)

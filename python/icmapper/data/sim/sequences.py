@@ -30,12 +30,16 @@ def sim_sequence(
         world = generate_city(city_seed)
     timestamps, poses = drive(world, drive_seed)
     rig = nuscenes_rig(image_size)
-    renderer = Renderer(world, rig, seed=int(np.random.default_rng([city_seed, drive_seed]).integers(2**31)))
+    renderer = Renderer(
+        world, rig, seed=int(np.random.default_rng([city_seed, drive_seed]).integers(2**31))
+    )
 
     def render(i: int) -> NDArray[np.uint8]:
         if not -len(timestamps) <= i < len(timestamps):
             raise IndexError(f"frame {i} out of range for {len(timestamps)} frames")
-        return renderer.render(poses[i], frame_seed=_frame_seed(city_seed, drive_seed, i), t=float(timestamps[i]))
+        return renderer.render(
+            poses[i], frame_seed=_frame_seed(city_seed, drive_seed, i), t=float(timestamps[i])
+        )
 
     return Sequence(f"sim-{city_seed}-{drive_seed}", "sim", world, timestamps, poses, rig, render)
 

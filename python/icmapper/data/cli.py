@@ -1,0 +1,50 @@
+"""`icmapper scenes ...`: look at data. `scenes preview` writes the preview PNG of one frame of a
+synthetic sequence (`--source sim`) or of an Argoverse 2 log (`--source av2 --log DIR`)."""
+
+from __future__ import annotations
+
+import argparse
+
+from icmapper.data.types import PerceptionRange
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    """Adds the `scenes` command and its `preview` sub-command."""
+    scenes = subparsers.add_parser("scenes", help="inspect data sources (preview pictures)")
+    sub = scenes.add_subparsers(dest="scenes_command", metavar="SUBCOMMAND")
+    p = sub.add_parser(
+        "preview", help="write the six cameras and the BEV ground truth of one frame to a PNG"
+    )
+    p.add_argument(
+        "--source", choices=("sim", "av2"), default="sim", help="synthetic city or an AV2 log"
+    )
+    p.add_argument(
+        "--city", type=int, default=10_003, help="sim: city seed (val cities are 10000-10099)"
+    )
+    p.add_argument("--drive", type=int, default=0, help="sim: drive seed")
+    p.add_argument("--log", default=None, help="av2: log directory")
+    p.add_argument("--frame", type=int, default=10, help="frame index")
+    p.add_argument("--range", default="60x30", help="BEV perception range, e.g. 60x30 or 100x50")
+    p.add_argument("--image-size", type=int, nargs=2, default=(128, 352), metavar=("H", "W"))
+    p.add_argument("--out", required=True, help="output PNG path")
+    p.set_defaults(func=_preview)
+    scenes.set_defaults(func=lambda args: (scenes.print_help(), 2)[1])
+
+
+def _preview(args: argparse.Namespace) -> int:
+    from icmapper.data.preview import preview_png
+
+    size = (int(args.image_size[0]), int(args.image_size[1]))
+    if args.source == "sim":
+        from icmapper.data.sim import sim_sequence
+
+        seq = sim_sequence(args.city, args.drive, image_size=size)
+    else:
+        if not args.log:
+            raise ValueError("--source av2 needs --log DIR (an Argoverse 2 log directory)")
+        from icmapper.data.av2 import load_av2_sequence
+
+        seq = load_av2_sequence(args.log, image_size=size)
+    out = preview_png(seq, args.frame, args.out, PerceptionRange.from_name(args.range))
+    print(f"wrote {out} ({seq.name}, frame {args.frame} of {len(seq)})")
+    return 0

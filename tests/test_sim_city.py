@@ -1,0 +1,79 @@
+"""Synthetic cities: determinism, splits, instance validity, lane graph."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from icmapper.data import MapClass
+from icmapper.data.sim import CITY_SEEDS, generate_city
+from shapely.geometry import Polygon
+
+
+def _signature(world) -> list[tuple[int, int, str, bytes]]:
+    return [(m.id, int(m.cls), m.style, m.points.tobytes()) for m in world.instances]
+
+
+def test_same_seed_same_city_and_different_seeds_differ() -> None:
+    a, b, c = generate_city(10_001), generate_city(10_001), generate_city(10_002)
+    assert _signature(a) == _signature(b)
+    assert sorted(a.lanes) == sorted(b.lanes)
+    assert _signature(a) != _signature(c)
+
+
+def test_split_ranges_disjoint() -> None:
+    sets = {k: set(v) for k, v in CITY_SEEDS.items()}
+    assert set(sets) == {"train", "val", "test"}
+    assert (
+        not sets["train"] & sets["val"]
+        and not sets["train"] & sets["test"]
+        and not sets["val"] & sets["test"]
+    )
+
+
+@pytest.mark.parametrize("seed", [0, 17, 10_050])
+def test_instances_valid(seed: int) -> None:
+    world = generate_city(seed)
+    ids = [m.id for m in world.instances]
+    assert len(ids) == len(set(ids))
+    classes = {m.cls for m in world.instances}
+    assert classes == {MapClass.PED_CROSSING, MapClass.DIVIDER, MapClass.BOUNDARY}
+    for m in world.instances:
+        assert isinstance(m.cls, MapClass)
+        assert m.points.ndim == 2 and m.points.shape[1] == 2 and m.points.shape[0] >= 2
+        assert np.all(np.isfinite(m.points))
+        assert m.style
+        assert m.closed == (m.cls == MapClass.PED_CROSSING)
+        if m.closed:
+            assert m.points.shape[0] >= 4
+            assert not np.allclose(m.points[0], m.points[-1])  # ring without a repeated point
+            poly = Polygon(m.points)
+            assert poly.is_valid and poly.area > 5.0
+    # Markings span a few hundred metres, dividers come in several styles.
+    styles = {m.style for m in world.instances if m.cls == MapClass.DIVIDER}
+    assert len(styles) >= 2
+    ext = np.ptp(np.concatenate([m.points for m in world.instances]), axis=0)
+    assert np.all(ext > 250) and np.all(ext < 700)
+
+
+@pytest.mark.parametrize("seed", [3, 10_100])
+def test_lane_graph_connected_and_inside_drivable(seed: int) -> None:
+    world = generate_city(seed)
+    assert world.lanes and world.drivable
+    area = Polygon(world.drivable[0]).buffer(0)
+    for p in world.drivable[1:]:
+        area = area.union(Polygon(p).buffer(0))
+    for lane in world.lanes.values():
+        assert lane.successors, f"lane {lane.id} has no successor"
+        assert all(s in world.lanes for s in lane.successors)
+        # a successor starts where its predecessor ends
+        for s in lane.successors:
+            assert np.linalg.norm(world.lanes[s].centerline[0] - lane.centerline[-1]) < 1e-6
+        mid = lane.centerline[len(lane.centerline) // 2]
+        assert area.buffer(0.5).contains(Polygon([mid, mid + 0.01, mid + [0, 0.01]]))
+
+
+def test_bad_seed() -> None:
+    with pytest.raises(ValueError, match="seed"):
+        generate_city(-1)
+    with pytest.raises(TypeError, match="seed"):
+        generate_city("3")  # type: ignore[arg-type]
