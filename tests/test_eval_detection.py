@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
 from icmapper.eval.chamfer import Resampled, chamfer_matrix, resample, sparse_chamfer
 from icmapper.eval.consistency import consistency_map
 from icmapper.eval.detection import average_precision, detection_ap

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
 from icmapper.eval.instances import from_frames
 from icmapper.eval.tracking import MotAccumulator, summarize, tracking_metrics
 

@@ -58,18 +58,19 @@ def resample(
     frac_closed = np.arange(num) / num  # (num,)
     frac = np.where(closed_rows[:, None], frac_closed[None], frac_open[None])  # (N, num)
     target = frac * length[:, None]  # (N, num)
-    # Batched searchsorted: shift each row into its own disjoint interval.
-    offset = (np.arange(n_rows) * (length.max() + 1.0))[:, None]  # (N, 1)
-    idx = np.searchsorted((cum + offset).ravel(), (target + offset).ravel(), side="right")
-    idx = idx.reshape(n_rows, num) - 1 - (np.arange(n_rows) * (n + 1))[:, None]  # (N, num)
-    idx = np.clip(idx, 0, n - 1)
-    seg_len = np.take_along_axis(seg, idx, axis=1)  # (N, num)
-    start = np.take_along_axis(cum, idx, axis=1)  # (N, num)
+    # Segment of every target, by one searchsorted with each row shifted into its own interval.
+    shift = (np.arange(n_rows) * (length.max() + 1.0))[:, None]  # (N, 1)
+    pos = np.searchsorted((cum[:, 1:] + shift).ravel(), (target + shift).ravel(), side="right")
+    idx = np.minimum(pos.reshape(n_rows, num) - (np.arange(n_rows) * n)[:, None], n - 1)  # (N, num)
+    flat = idx + (np.arange(n_rows) * (n + 1))[:, None]  # (N, num) rows into ext
+    seg_len = seg.ravel()[flat - np.arange(n_rows)[:, None]]  # (N, num): seg has n per row
+    start = cum.ravel()[flat]  # (N, num)
     with np.errstate(invalid="ignore", divide="ignore"):
         t = np.where(seg_len > 0, (target - start) / seg_len, 0.0)  # (N, num)
     t = np.clip(t, 0.0, 1.0)[..., None]  # (N, num, 1)
-    p0 = np.take_along_axis(ext, idx[..., None], axis=1)  # (N, num, 2)
-    p1 = np.take_along_axis(ext, idx[..., None] + 1, axis=1)  # (N, num, 2)
+    ext_flat = ext.reshape(-1, 2)
+    p0 = ext_flat[flat]  # (N, num, 2)
+    p1 = ext_flat[flat + 1]  # (N, num, 2)
     return p0 + t * (p1 - p0)  # (N, num, 2)
 
 
@@ -122,14 +123,36 @@ def _directed_min_sq(a: NDArray[np.float64], b: NDArray[np.float64]) -> tuple[ND
     return d.min(axis=2), d.min(axis=1)
 
 
-def chamfer_pairs(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
+#: Backend of the exact stage: "numpy" or "engine" (icmapper.geom.chamfer_matrix, Rust). The
+#: default is the faster one in the benchmark (python -m icmapper.eval.bench; BENCHMARKS.md).
+BACKEND = "numpy"
+
+
+def chamfer_pairs(
+    a: NDArray[np.float64], b: NDArray[np.float64], backend: str | None = None
+) -> NDArray[np.float64]:
     """Exact Chamfer distance of paired point sets: a (P, n, 2), b (P, m, 2) -> (P,) float64."""
+    backend = BACKEND if backend is None else backend
+    if backend == "engine":
+        return _chamfer_pairs_engine(a, b)
+    if backend != "numpy":
+        raise ValueError(f"unknown Chamfer backend {backend!r}; expected 'numpy' or 'engine'")
     out = np.empty(a.shape[0])
     for s in range(0, a.shape[0], _CHUNK):
         ab, ba = _directed_min_sq(a[s : s + _CHUNK], b[s : s + _CHUNK])
         out[s : s + _CHUNK] = 0.5 * (
             np.sqrt(np.maximum(ab, 0.0)).mean(axis=1) + np.sqrt(np.maximum(ba, 0.0)).mean(axis=1)
         )
+    return out
+
+
+def _chamfer_pairs_engine(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
+    """chamfer_pairs through the Rust engine, one (1, B) call per pair (a, b as above)."""
+    from icmapper.geom import chamfer_matrix as engine_matrix
+
+    out = np.empty(a.shape[0])
+    for p in range(a.shape[0]):
+        out[p] = engine_matrix(a[p : p + 1], b[p : p + 1])[0, 0]
     return out
 
 
@@ -191,6 +214,7 @@ def sparse_chamfer(
     b: Resampled,
     key_b: NDArray[np.int64],
     max_dist: float,
+    backend: str | None = None,
 ) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.float64]]:
     """Exact Chamfer distances of all same-key pairs whose distance is <= max_dist.
 
@@ -207,6 +231,6 @@ def sparse_chamfer(
     keep = chamfer_lower_bound(a, ia, b, ib) <= max_dist
     ia, ib = ia[keep], ib[keep]
     # 3. Exact distances of the survivors.
-    dist = chamfer_pairs(a.fine[ia], b.fine[ib])
+    dist = chamfer_pairs(a.fine[ia], b.fine[ib], backend)
     keep = dist <= max_dist
     return ia[keep], ib[keep], dist[keep]

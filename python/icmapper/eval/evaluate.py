@@ -190,4 +190,3 @@ def evaluate_run(
     result["run"] = str(run.path)
     result["source"] = run.source
     return result
-

@@ -1,0 +1,72 @@
+"""`icmapper eval RUN_DIR [RUN_DIR ...]`: prints Tables 1-3 for runs, optionally writes JSON."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import tempfile
+from pathlib import Path
+from typing import Any
+
+from icmapper.eval.tracking import DEFAULT_SCORE_THRESHOLD
+
+
+def _clean(x: Any) -> Any:
+    """NaN / inf -> None / "inf" so the JSON is standard."""
+    if isinstance(x, float):
+        if math.isnan(x):
+            return None
+        if math.isinf(x):
+            return "inf" if x > 0 else "-inf"
+        return x
+    if isinstance(x, dict):
+        return {k: _clean(v) for k, v in x.items()}
+    if isinstance(x, list | tuple):
+        return [_clean(v) for v in x]
+    return x
+
+
+def write_json(path: str | os.PathLike, results: list[dict]) -> None:
+    """Writes {"format": "icmapper-eval", "version": 1, "runs": [...]} atomically."""
+    path = Path(path)
+    payload = {"format": "icmapper-eval", "version": 1, "runs": _clean(results)}
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent or ".")
+    try:
+        with os.fdopen(fd, "w") as fh:
+            json.dump(payload, fh, indent=1)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def run(args: argparse.Namespace) -> int:
+    from icmapper.eval.evaluate import evaluate_run
+    from icmapper.eval.report import markdown
+
+    results = [evaluate_run(d, score_threshold=args.score_threshold) for d in args.runs]
+    print(markdown(results), end="")
+    if args.json:
+        write_json(args.json, results)
+    return 0
+
+
+def register(subparsers: Any) -> None:
+    """Adds the `eval` sub-command."""
+    p = subparsers.add_parser(
+        "eval",
+        help="evaluate run folders (detection AP, C-mAP, tracking, global map)",
+        description="Evaluates run folders against ground truth recomputed from their source and "
+        "prints markdown tables (one row per run); see docs/eval.md.",
+    )
+    p.add_argument("runs", nargs="+", metavar="RUN_DIR", help="run folder(s)")
+    p.add_argument("--json", metavar="PATH", help="also write the numbers as JSON")
+    p.add_argument(
+        "--score-threshold",
+        type=float,
+        default=DEFAULT_SCORE_THRESHOLD,
+        help=f"tracking uses predictions with score >= this (default {DEFAULT_SCORE_THRESHOLD})",
+    )
+    p.set_defaults(func=run)
