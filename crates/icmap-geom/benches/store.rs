@@ -75,7 +75,7 @@ fn patches(k: usize, extent: f64, margin: f64, seed: u64) -> Vec<Patch> {
             let pose = Pose2::new(
                 rng.uniform(0.0, extent),
                 rng.uniform(0.0, extent),
-                rng.uniform(-3.14, 3.14),
+                rng.uniform(-std::f64::consts::PI, std::f64::consts::PI),
             )
             .unwrap();
             Patch::new(pose, 30.0, 15.0, margin).unwrap()
