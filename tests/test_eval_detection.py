@@ -172,3 +172,13 @@ def test_matches_reference_implementation() -> None:
     for name, per in ours["AP"].items():
         for thr, v in per.items():
             assert v == pytest.approx(ref[name][thr], abs=1e-9, nan_ok=True)
+
+
+def test_blocked_matching_equals_single_block() -> None:
+    from icmapper.eval.bench import make_dataset
+    from icmapper.eval.detection import match
+
+    pred, gt = make_dataset(num_seqs=4, num_frames=5, num_preds=20, half=(30.0, 15.0), seed=7)
+    one, many = match(pred, gt, 1.5), match(pred, gt, 1.5, block_rows=30)
+    for f in ("pairs_pred", "pairs_gt", "pairs_dist", "nearest_gt", "nearest_dist"):
+        np.testing.assert_array_equal(getattr(one, f), getattr(many, f))

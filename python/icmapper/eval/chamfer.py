@@ -15,6 +15,7 @@ metrics is the same as with the dense matrix. This module does no I/O.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -41,21 +42,44 @@ def resample(
     last point inclusive. A row of zero length gives ``num`` copies of its first point.
     Returns (N, num, 2) float64.
     """
+    return resample_at(points, np.linspace(0.0, 1.0, num), np.arange(num) / num, closed)
+
+
+def resample_at(
+    points: NDArray[np.floating],
+    frac_open: NDArray[np.float64],
+    frac_closed: NDArray[np.float64],
+    closed: bool | NDArray[np.bool_] = False,
+) -> NDArray[np.float64]:
+    """Points at arc-length fractions (frac_open (m,) for open rows, frac_closed (m,) for closed
+    rows, of the closed contour's length) of polylines (N, n, 2) -> (N, m, 2) float64."""
     pts = np.asarray(points, dtype=np.float64)
     if pts.ndim != 3 or pts.shape[-1] != 2 or pts.shape[1] < 1:
         raise ValueError(f"points must have shape (N, n, 2) with n >= 1, got {pts.shape}")
+    closed_rows = np.broadcast_to(np.asarray(closed, dtype=bool), (pts.shape[0],))
+    out = np.empty((pts.shape[0], frac_open.shape[0], 2))
+    step = 2048  # rows per chunk: temporaries stay in cache
+    for s0 in range(0, pts.shape[0], step):
+        out[s0 : s0 + step] = _resample_chunk(
+            pts[s0 : s0 + step], frac_open, frac_closed, closed_rows[s0 : s0 + step]
+        )
+    return out
+
+
+def _resample_chunk(
+    pts: NDArray[np.float64],
+    frac_open: NDArray[np.float64],
+    frac_closed: NDArray[np.float64],
+    closed_rows: NDArray[np.bool_],
+) -> NDArray[np.float64]:
     n_rows, n = pts.shape[:2]
-    if n_rows == 0:
-        return np.zeros((0, num, 2))
-    closed_rows = np.broadcast_to(np.asarray(closed, dtype=bool), (n_rows,))
+    num = frac_open.shape[0]
     # Closing point: the first point for closed rows, a zero-length repeat of the last otherwise.
     tail = np.where(closed_rows[:, None], pts[:, 0], pts[:, -1])  # (N, 2)
     ext = np.concatenate([pts, tail[:, None]], axis=1)  # (N, n + 1, 2)
     seg = np.linalg.norm(np.diff(ext, axis=1), axis=-1)  # (N, n)
     cum = np.concatenate([np.zeros((n_rows, 1)), np.cumsum(seg, axis=1)], axis=1)  # (N, n + 1)
     length = cum[:, -1]  # (N,)
-    frac_open = np.linspace(0.0, 1.0, num)  # (num,)
-    frac_closed = np.arange(num) / num  # (num,)
     frac = np.where(closed_rows[:, None], frac_closed[None], frac_open[None])  # (N, num)
     target = frac * length[:, None]  # (N, num)
     # Segment of every target, by one searchsorted with each row shifted into its own interval.
@@ -74,16 +98,23 @@ def resample(
     return p0 + t * (p1 - p0)  # (N, num, 2)
 
 
+# Arc-length offset (in sample spacings) of every fine sample from its coarse sample.
+_OFFSET = np.abs(np.arange(NUM_SAMPLES) - COARSE_INDEX[_ASSIGN])  # (200,)
+
+
 @dataclass
 class Resampled:
     """Instances prepared for Chamfer evaluation.
 
-    fine (N, 200, 2) float64 protocol samples; coarse (N, 41, 2) a subset of them;
-    err_mean / err_max (N,): mean / max distance of a fine sample to its attributed coarse sample
-    (the exact error terms of the lower bound); lo / hi (N, 2) bounding boxes.
+    points (N, n, 2) float64 raw instances, closed (N,) bool; coarse (N, 41, 2): the protocol
+    samples of index COARSE_INDEX; err_mean / err_max (N,): bounds of the mean / max distance of a
+    fine sample to its attributed coarse sample (arc offset x spacing >= Euclidean); lo / hi (N, 2)
+    bounding boxes of the raw vertices (they contain every sample). The 200-point samples are
+    made on demand (:meth:`fine_rows`, :attr:`fine`).
     """
 
-    fine: NDArray[np.float64]
+    points: NDArray[np.float64]
+    closed: NDArray[np.bool_]
     coarse: NDArray[np.float64]
     err_mean: NDArray[np.float64]
     err_max: NDArray[np.float64]
@@ -91,24 +122,38 @@ class Resampled:
     hi: NDArray[np.float64]
 
     def __len__(self) -> int:
-        return int(self.fine.shape[0])
+        return int(self.points.shape[0])
 
     @staticmethod
     def from_points(points: NDArray[np.floating], closed: bool | NDArray[np.bool_]) -> Resampled:
         """points (N, n, 2) raw instances (any n >= 1); closed bool or (N,) bool."""
-        fine = resample(points, NUM_SAMPLES, closed)  # (N, 200, 2)
-        return Resampled.from_fine(fine)
-
-    @staticmethod
-    def from_fine(fine: NDArray[np.float64]) -> Resampled:
-        """fine (N, 200, 2): instances already resampled with :func:`resample`."""
-        coarse = fine[:, COARSE_INDEX]  # (N, 41, 2)
-        err = np.linalg.norm(fine - coarse[:, _ASSIGN], axis=-1)  # (N, 200)
-        if fine.shape[0] == 0:
+        pts = np.asarray(points, dtype=np.float64)
+        if pts.ndim != 3 or pts.shape[-1] != 2 or pts.shape[1] < 1:
+            raise ValueError(f"points must have shape (N, n, 2) with n >= 1, got {pts.shape}")
+        closed_rows = np.broadcast_to(np.asarray(closed, dtype=bool), (pts.shape[0],)).copy()
+        frac_open = np.linspace(0.0, 1.0, NUM_SAMPLES)[COARSE_INDEX]  # (41,)
+        frac_closed = (np.arange(NUM_SAMPLES) / NUM_SAMPLES)[COARSE_INDEX]  # (41,)
+        coarse = resample_at(pts, frac_open, frac_closed, closed_rows)  # (N, 41, 2)
+        ring_gap = np.linalg.norm(pts[:, 0] - pts[:, -1], axis=-1)  # (N,)
+        length = np.linalg.norm(np.diff(pts, axis=1), axis=-1).sum(axis=1)  # (N,)
+        length = length + np.where(closed_rows, ring_gap, 0.0)
+        spacing = length / np.where(closed_rows, NUM_SAMPLES, NUM_SAMPLES - 1)  # (N,)
+        if pts.shape[0] == 0:
             lo = hi = np.zeros((0, 2))
         else:
-            lo, hi = fine.min(axis=1), fine.max(axis=1)  # (N, 2)
-        return Resampled(fine, coarse, err.mean(axis=1), err.max(axis=1), lo, hi)
+            lo, hi = pts.min(axis=1), pts.max(axis=1)  # (N, 2)
+        return Resampled(
+            pts, closed_rows, coarse, spacing * _OFFSET.mean(), spacing * _OFFSET.max(), lo, hi
+        )
+
+    def fine_rows(self, rows: NDArray[np.int64]) -> NDArray[np.float64]:
+        """The 200 protocol samples of the given rows -> (len(rows), 200, 2)."""
+        return resample(self.points[rows], NUM_SAMPLES, self.closed[rows])
+
+    @property
+    def fine(self) -> NDArray[np.float64]:
+        """All rows' 200 protocol samples (N, 200, 2)."""
+        return resample(self.points, NUM_SAMPLES, self.closed)
 
 
 def _directed_min_sq(a: NDArray[np.float64], b: NDArray[np.float64]) -> tuple[NDArray, NDArray]:
@@ -123,9 +168,10 @@ def _directed_min_sq(a: NDArray[np.float64], b: NDArray[np.float64]) -> tuple[ND
     return d.min(axis=2), d.min(axis=1)
 
 
-#: Backend of the exact stage: "numpy" or "engine" (icmapper.geom.chamfer_matrix, Rust). The
-#: default is the faster one in the benchmark (python -m icmapper.eval.bench; BENCHMARKS.md).
-BACKEND = "numpy"
+#: Backend of the exact stage: "numpy", "engine" (icmapper.geom.chamfer_matrix, Rust) or "auto"
+#: (the engine when it imports, else numpy). "auto" because the engine measured faster in the
+#: benchmark (python -m icmapper.eval.bench; BENCHMARKS.md). Both give the same values (1e-14).
+BACKEND = "auto"
 
 
 def chamfer_pairs(
@@ -133,6 +179,8 @@ def chamfer_pairs(
 ) -> NDArray[np.float64]:
     """Exact Chamfer distance of paired point sets: a (P, n, 2), b (P, m, 2) -> (P,) float64."""
     backend = BACKEND if backend is None else backend
+    if backend == "auto":
+        backend = "engine" if _engine_available() else "numpy"
     if backend == "engine":
         return _chamfer_pairs_engine(a, b)
     if backend != "numpy":
@@ -144,6 +192,17 @@ def chamfer_pairs(
             np.sqrt(np.maximum(ab, 0.0)).mean(axis=1) + np.sqrt(np.maximum(ba, 0.0)).mean(axis=1)
         )
     return out
+
+
+@functools.lru_cache(maxsize=1)
+def _engine_available() -> bool:
+    try:
+        from icmapper.geom import chamfer_matrix as engine_matrix
+
+        engine_matrix(np.zeros((1, 2, 2)), np.ones((1, 2, 2)))
+    except Exception:  # extension missing, or built without this function
+        return False
+    return True
 
 
 def _chamfer_pairs_engine(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -230,7 +289,14 @@ def sparse_chamfer(
     # 2. Coarse lower bound.
     keep = chamfer_lower_bound(a, ia, b, ib) <= max_dist
     ia, ib = ia[keep], ib[keep]
-    # 3. Exact distances of the survivors.
-    dist = chamfer_pairs(a.fine[ia], b.fine[ib], backend)
+    # 3. Exact distances of the survivors (samples made for the rows involved only).
+    ua, inv_a = np.unique(ia, return_inverse=True)
+    ub, inv_b = np.unique(ib, return_inverse=True)
+    fa, fb = a.fine_rows(ua), b.fine_rows(ub)  # (ua, 200, 2), (ub, 200, 2)
+    dist = np.empty(ia.shape[0])
+    step = 4096  # pairs per gather: bounded memory
+    for s0 in range(0, ia.shape[0], step):
+        sl = slice(s0, s0 + step)
+        dist[sl] = chamfer_pairs(fa[inv_a[sl]], fb[inv_b[sl]], backend)
     keep = dist <= max_dist
     return ia[keep], ib[keep], dist[keep]

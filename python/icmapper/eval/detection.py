@@ -51,29 +51,52 @@ def match(
     pred: Instances,
     gt: Instances,
     max_dist: float,
-    pred_res: Resampled | None = None,
-    gt_res: Resampled | None = None,
+    block_rows: int = 20_000,
+    backend: str | None = None,
 ) -> Matching:
     """Chamfer pairs (<= max_dist) and nearest ground truth of every prediction.
 
     pred, gt: tables in the same frames (same seq/frame numbering), points in the same frame.
+    Works through blocks of whole sequences of about ``block_rows`` predictions, so memory stays
+    bounded (the 200-point samples of a block only).
     """
-    pred_res = prepare(pred) if pred_res is None else pred_res
-    gt_res = prepare(gt) if gt_res is None else gt_res
     num_frames = int(max(pred.frame.max(initial=0), gt.frame.max(initial=0))) + 1
-    ip, ig, dist = sparse_chamfer(
-        pred_res, pred.key(num_frames), gt_res, gt.key(num_frames), max_dist
-    )
+    kp, kg = pred.key(num_frames), gt.key(num_frames)
+    p_order = np.argsort(pred.seq, kind="stable")
+    g_order = np.argsort(gt.seq, kind="stable")
+    seqs = np.union1d(pred.seq, gt.seq)
+    p_cut = np.searchsorted(pred.seq[p_order], seqs)
+    g_cut = np.searchsorted(gt.seq[g_order], seqs)
+    parts_p, parts_g, parts_d = [], [], []
+    i = 0
+    while i < seqs.size:
+        j = i + 1  # extend the block by whole sequences
+        while j < seqs.size and p_cut[j] - p_cut[i] < block_rows:
+            j += 1
+        p_end = p_cut[j] if j < seqs.size else len(pred)
+        g_end = g_cut[j] if j < seqs.size else len(gt)
+        rows_p, rows_g = p_order[p_cut[i] : p_end], g_order[g_cut[i] : g_end]
+        sub_p, sub_g = pred.select(rows_p), gt.select(rows_g)
+        ip, ig, dist = sparse_chamfer(
+            prepare(sub_p), kp[rows_p], prepare(sub_g), kg[rows_g], max_dist, backend
+        )
+        parts_p.append(rows_p[ip]), parts_g.append(rows_g[ig]), parts_d.append(dist)
+        i = j
+    ip = np.concatenate(parts_p + [np.zeros(0, np.int64)])
+    ig = np.concatenate(parts_g + [np.zeros(0, np.int64)])
+    dist = np.concatenate(parts_d + [np.zeros(0)])
     nearest_gt = np.full(len(pred), -1, dtype=np.int64)
     nearest_dist = np.full(len(pred), np.inf)
+    order = np.lexsort((ig, dist, ip))  # by prediction, then distance, then gt row
+    ip, ig, dist = ip[order], ig[order], dist[order]
     if ip.size:
-        order = np.lexsort((ig, dist, ip))  # by prediction, then distance, then gt row
-        first = np.ones(order.size, dtype=bool)
-        first[1:] = ip[order[1:]] != ip[order[:-1]]
-        sel = order[first]
-        nearest_gt[ip[sel]] = ig[sel]
-        nearest_dist[ip[sel]] = dist[sel]
-    return Matching(max_dist, ip, ig, dist, nearest_gt, nearest_dist)
+        first = np.ones(ip.size, dtype=bool)
+        first[1:] = ip[1:] != ip[:-1]
+        nearest_gt[ip[first]] = ig[first]
+        nearest_dist[ip[first]] = dist[first]
+    # pairs sorted by prediction then gt row
+    order = np.lexsort((ig, ip))
+    return Matching(max_dist, ip[order], ig[order], dist[order], nearest_gt, nearest_dist)
 
 
 def score_order(scores: NDArray[np.float64]) -> NDArray[np.int64]:

@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 
 from icmapper.eval.consistency import consistency_map
-from icmapper.eval.detection import THRESHOLDS, detection_ap, match, prepare
+from icmapper.eval.detection import THRESHOLDS, detection_ap, match
 from icmapper.eval.globalmap import CD_CAP, CD_STEP, global_metrics, load_global_map
 from icmapper.eval.instances import Instances
 from icmapper.eval.runfmt import FramePredictions, Run, RunFormatError, read_run
@@ -102,7 +102,7 @@ def evaluate(
     thresholds = THRESHOLDS[range_name]
     gate = GATES[range_name] if gate is None else float(gate)
     pred, gt = _pred_table(predictions_per_seq), _gt_table(gt_per_seq)
-    m = match(pred, gt, max(max(thresholds), gate), prepare(pred), prepare(gt))
+    m = match(pred, gt, max(max(thresholds), gate))
     det = detection_ap(pred, gt, thresholds, m)
     cons = consistency_map(pred, gt, thresholds, m)
     trk = tracking_metrics(pred, gt, gate, len(gt_per_seq), score_threshold, m)
