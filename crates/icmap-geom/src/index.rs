@@ -216,6 +216,24 @@ mod tests {
     }
 
     #[test]
+    fn huge_coordinates_do_not_panic() {
+        // Box volumes overflow to inf (and inf * 0 = NaN in the SAH costs): quality may suffer but
+        // the answers stay exact.
+        let mut idx = SpatialIndex::new();
+        for s in 0..200u32 {
+            let x: f64 = if s % 2 == 0 { -1e308 } else { 1e308 };
+            let w: f64 = if s % 3 == 0 { 0.0 } else { 1.7e308 };
+            idx.upsert(s, bx(x.min(x + w), (s as f64) * 1e306, w.min(1e308), 0.0));
+        }
+        for s in (0..200u32).step_by(3) {
+            idx.remove(s);
+        }
+        idx.rebuild();
+        let q = bx(-1e308, -1e308, 1.7e308, 1.7e308);
+        assert_eq!(sorted(idx.query(&q)), idx.query_brute_force(&q));
+    }
+
+    #[test]
     fn identical_boxes_rebuild() {
         let items = (0..300u32).map(|s| (s, bx(1.0, 1.0, 0.0, 0.0)));
         let idx = SpatialIndex::from_boxes(items);
