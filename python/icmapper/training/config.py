@@ -52,6 +52,8 @@ class DataConfig:
     range: str = "60x30"
     image_size: tuple[int, int] = (64, 176)
     num_workers: int = 0
+    #: On-disk image cache folder (icmapper.data.datasets.ImageCache), "" for none; one per size.
+    cache_dir: str = ""
 
 
 @dataclass(frozen=True)

@@ -75,8 +75,14 @@ def build_dataset(cfg: TrainConfig, stage: int) -> tuple[Dataset, Any]:
         raise RuntimeError(
             f"data source {spec!r} needs icmapper.data.datasets/sources, not available: {exc}"
         ) from None
-    seqs = sources.open_source(spec)
-    ds = datasets.ClipDataset(seqs, clip_len=clip_len, rng=cfg.perception_range, seed=cfg.seed)
+    seqs = sources.open_source(spec, image_size=tuple(cfg.data.image_size), seed=cfg.seed)
+    ds = datasets.ClipDataset(
+        seqs,
+        clip_len=clip_len,
+        rng=cfg.perception_range,
+        seed=cfg.seed,
+        cache_dir=cfg.data.cache_dir or None,
+    )
     return ds, datasets.collate_clips
 
 
