@@ -1,7 +1,592 @@
 //! Smoothing cubic-spline fit of a polyline (the semantics of scipy's `splprep`).
+//!
+//! A re-implementation of Dierckx's FITPACK `parcur`/`fppara` algorithm (the code behind scipy's
+//! `splprep(x, s=s, k=k)` with unit weights), so the fitted curves agree with scipy:
+//!
+//! 1. chord-length parameter `u` on `[0, 1]`;
+//! 2. start from the least-squares polynomial (no interior knots); while the sum of squared
+//!    residuals `fp` exceeds `s`, add knots at data points in the knot intervals with the largest
+//!    residuals (FITPACK's `fpknot` rule and knot-count schedule) and refit by least squares
+//!    (banded Givens QR), falling back to the interpolation knots when all are used;
+//! 3. with the knots fixed, find the smoothing weight `p` such that `fp(p) = s` (to FITPACK's
+//!    relative tolerance 1e-3) by the rational-interpolation iteration of `fprati`, minimising the
+//!    jumps of the k-th derivative at the interior knots (`fpdisc`).
+//!
+//! The fitted curve is then evaluated about `spacing` apart by arc length.
 
-use crate::error::Result;
-use crate::types::Point;
+use crate::error::{GeomError, Result};
+use crate::resample::{cumulative_lengths, dedup, polyline_length, MAX_RESAMPLE_POINTS};
+use crate::types::{validate_points, Point};
+
+/// FITPACK's relative tolerance on `fp = s` (parcur's `tol`).
+const TOL: f64 = 1e-3;
+/// FITPACK's maximal number of iterations for the smoothing weight (parcur's `maxit`).
+const MAXIT: usize = 20;
+/// Consecutive input points closer than this (metres) are merged before fitting.
+const DEDUP_EPS: f64 = 1e-9;
+
+/// A fitted parametric spline curve `u in [0, 1] -> (x(u), y(u))` in B-spline form.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SplineCurve {
+    /// Knot vector (`n` knots, `degree + 1` repeated at each end), as scipy's `tck[0]`.
+    pub knots: Vec<f64>,
+    /// B-spline coefficients of x and y (`n - degree - 1` each), as scipy's `tck[1]`.
+    pub coeffs: [Vec<f64>; 2],
+    /// Spline degree (3, or lower for 2 or 3 distinct points), as scipy's `tck[2]`.
+    pub degree: usize,
+    /// The chord-length parameter of the (deduplicated) data points, as scipy's `u`.
+    pub params: Vec<f64>,
+    /// Weighted sum of squared residuals of the fit (scipy's `fp`).
+    pub residual: f64,
+}
+
+impl SplineCurve {
+    /// The curve at parameter `u` (clamped to `[0, 1]`).
+    pub fn eval(&self, u: f64) -> Point {
+        let k = self.degree;
+        let t = &self.knots;
+        let nk1 = t.len() - k - 1;
+        let u = u.clamp(t[k], t[nk1]);
+        // Knot interval t[l] <= u < t[l + 1] with k <= l <= nk1 - 1 (binary search).
+        let l = k + t[k + 1..nk1].partition_point(|&x| x <= u);
+        let h = bspline_basis(t, k, u, l);
+        let mut out = [0.0; 2];
+        for (d, o) in out.iter_mut().enumerate() {
+            *o = (0..=k).map(|i| self.coeffs[d][l - k + i] * h[i]).sum();
+        }
+        Point::new(out[0], out[1])
+    }
+}
+
+/// The `k + 1` non-zero B-splines of degree `k` at `x` with `t[l] <= x < t[l + 1]` (de Boor-Cox,
+/// FITPACK's `fpbspl`); entry `i` belongs to coefficient `l - k + i`.
+fn bspline_basis(t: &[f64], k: usize, x: f64, l: usize) -> [f64; 6] {
+    let mut h = [0.0; 6];
+    let mut hh = [0.0; 6];
+    h[0] = 1.0;
+    for j in 1..=k {
+        hh[..j].copy_from_slice(&h[..j]);
+        h[0] = 0.0;
+        for i in 1..=j {
+            let li = l + i;
+            let lj = li - j;
+            let (tli, tlj) = (t[li], t[lj]);
+            if tli == tlj {
+                h[i] = 0.0;
+                continue;
+            }
+            let f = hh[i - 1] / (tli - tlj);
+            h[i - 1] += f * (tli - x);
+            h[i] = f * (x - tlj);
+        }
+    }
+    h
+}
+
+/// Givens rotation zeroing `piv` against `ww` (FITPACK `fpgivs`): returns `(cos, sin)` and
+/// replaces `ww` by the rotated value.
+fn givens(piv: f64, ww: &mut f64) -> (f64, f64) {
+    let store = piv.abs();
+    let dd = if store >= *ww {
+        store * (1.0 + (*ww / piv).powi(2)).sqrt()
+    } else {
+        *ww * (1.0 + (piv / *ww).powi(2)).sqrt()
+    };
+    if dd == 0.0 {
+        return (1.0, 0.0);
+    }
+    let (cos, sin) = (*ww / dd, piv / dd);
+    *ww = dd;
+    (cos, sin)
+}
+
+/// Applies a Givens rotation to the pair `(a, b)` (FITPACK `fprota`).
+fn rotate(cos: f64, sin: f64, a: &mut f64, b: &mut f64) {
+    let (s1, s2) = (*a, *b);
+    *b = cos * s2 + sin * s1;
+    *a = cos * s1 - sin * s2;
+}
+
+/// Back substitution for the banded upper-triangular `r` (`r[i][j]` = R(i, i + j), bandwidth `bw`).
+fn back_substitute(r: &[[f64; 5]], z: &[f64], bw: usize) -> Vec<f64> {
+    let n = z.len();
+    let mut c = vec![0.0; n];
+    for i in (0..n).rev() {
+        let mut acc = z[i];
+        for l in 1..bw.min(n - i) {
+            acc -= c[i + l] * r[i][l];
+        }
+        c[i] = acc / r[i][0];
+    }
+    c
+}
+
+/// Least-squares fit with fixed knots: the triangularised system and the fit.
+struct LsqFit {
+    /// Banded R of the observation matrix (bandwidth k + 1).
+    r: Vec<[f64; 5]>,
+    /// Rotated right-hand sides (x and y).
+    z: [Vec<f64>; 2],
+    /// Coefficients (x and y).
+    c: [Vec<f64>; 2],
+    /// Sum of squared residuals.
+    fp: f64,
+}
+
+/// Per data point: its knot interval `l` and its `k + 1` basis values.
+struct Design {
+    interval: Vec<usize>,
+    basis: Vec<[f64; 6]>,
+}
+
+fn design(t: &[f64], k: usize, u: &[f64]) -> Design {
+    let nk1 = t.len() - k - 1;
+    let mut l = k;
+    let mut interval = Vec::with_capacity(u.len());
+    let mut basis = Vec::with_capacity(u.len());
+    for &ui in u {
+        while ui >= t[l + 1] && l + 1 < nk1 {
+            l += 1;
+        }
+        interval.push(l);
+        basis.push(bspline_basis(t, k, ui, l));
+    }
+    Design { interval, basis }
+}
+
+fn lsq_fit(t: &[f64], k: usize, u: &[f64], x: &[[f64; 2]], des: &Design) -> LsqFit {
+    let k1 = k + 1;
+    let nk1 = t.len() - k1;
+    let mut r = vec![[0.0; 5]; nk1];
+    let mut z = [vec![0.0; nk1], vec![0.0; nk1]];
+    let mut fp = 0.0;
+    for it in 0..u.len() {
+        let mut h = des.basis[it];
+        let mut xi = x[it];
+        let j0 = des.interval[it] - k;
+        for i in 0..k1 {
+            let piv = h[i];
+            if piv == 0.0 {
+                continue;
+            }
+            let j = j0 + i;
+            let (cos, sin) = givens(piv, &mut r[j][0]);
+            for d in 0..2 {
+                rotate(cos, sin, &mut xi[d], &mut z[d][j]);
+            }
+            for i1 in i + 1..k1 {
+                rotate(cos, sin, &mut h[i1], &mut r[j][i1 - i]);
+            }
+        }
+        fp += xi[0] * xi[0] + xi[1] * xi[1];
+    }
+    let c = [
+        back_substitute(&r, &z[0], k1),
+        back_substitute(&r, &z[1], k1),
+    ];
+    LsqFit { r, z, c, fp }
+}
+
+/// Squared residual of data point `it` for coefficients `c`.
+fn residual2(c: &[Vec<f64>; 2], k: usize, des: &Design, x: &[[f64; 2]], it: usize) -> f64 {
+    let l0 = des.interval[it] - k;
+    let h = &des.basis[it];
+    (0..2)
+        .map(|d| {
+            let v: f64 = (0..=k).map(|i| c[d][l0 + i] * h[i]).sum();
+            (v - x[it][d]).powi(2)
+        })
+        .sum()
+}
+
+/// Discontinuity jumps of the k-th derivative of the B-splines at the interior knots (FITPACK
+/// `fpdisc`): one row of `k + 2` entries per interior knot, row `r` acting on coefficients
+/// `r..r + k + 2`.
+fn discontinuity_jumps(t: &[f64], k: usize) -> Vec<[f64; 6]> {
+    let n = t.len();
+    let (k1, k2) = (k + 1, k + 2);
+    let nk1 = n - k1;
+    let tt = |i: usize| t[i - 1]; // 1-based access, as in FITPACK
+    let fac = (nk1 - k) as f64 / (tt(nk1 + 1) - tt(k1));
+    let mut rows = Vec::with_capacity(n.saturating_sub(2 * k1));
+    for l in k2..=nk1 {
+        let mut h = [0.0; 12];
+        for j in 1..=k1 {
+            h[j] = tt(l) - tt(l + j - k2);
+            h[j + k1] = tt(l) - tt(l + j);
+        }
+        let mut row = [0.0; 6];
+        let mut lp = l - k1;
+        for (j, cell) in row.iter_mut().enumerate().take(k2) {
+            let mut prod = h[j + 1];
+            for i in 1..=k {
+                prod *= h[j + 1 + i] * fac;
+            }
+            *cell = (tt(lp + k1) - tt(lp)) / prod;
+            lp += 1;
+        }
+        rows.push(row);
+    }
+    rows
+}
+
+/// Rational interpolation step for the smoothing weight (FITPACK `fprati`); updates the bracket.
+fn rational_step(p1: &mut f64, f1: &mut f64, p2: f64, f2: f64, p3: &mut f64, f3: &mut f64) -> f64 {
+    let p = if *p3 > 0.0 {
+        let h1 = *f1 * (f2 - *f3);
+        let h2 = f2 * (*f3 - *f1);
+        let h3 = *f3 * (*f1 - f2);
+        -(*p1 * p2 * h3 + p2 * *p3 * h1 + *p3 * *p1 * h2) / (*p1 * h1 + p2 * h2 + *p3 * h3)
+    } else {
+        (*p1 * (*f1 - *f3) * f2 - p2 * (f2 - *f3) * *f1) / ((*f1 - f2) * *f3)
+    };
+    if f2 < 0.0 {
+        *p3 = p2;
+        *f3 = f2;
+    } else {
+        *p1 = p2;
+        *f1 = f2;
+    }
+    p
+}
+
+/// Interior knots for interpolation (FITPACK: data points for odd k, midpoints for even k).
+fn interpolation_knots(u: &[f64], k: usize) -> Vec<f64> {
+    let m = u.len();
+    let mk1 = m - (k + 1);
+    let k3 = k / 2;
+    (0..mk1)
+        .map(|i| {
+            let j = k3 + 1 + i; // 0-based index of FITPACK's u(k3 + 2 + i)
+            if k % 2 == 0 {
+                0.5 * (u[j] + u[j - 1])
+            } else {
+                u[j]
+            }
+        })
+        .collect()
+}
+
+fn full_knots(interior: &[f64], k: usize) -> Vec<f64> {
+    let mut t = vec![0.0; k + 1];
+    t.extend_from_slice(interior);
+    t.extend(std::iter::repeat_n(1.0, k + 1));
+    t
+}
+
+/// Adds one knot at a data point in the interval with the largest residual sum among those with
+/// interior data points (FITPACK `fpknot`). Returns false when no interval can take a knot.
+fn add_knot(
+    u: &[f64],
+    interior: &mut Vec<f64>,
+    fpint: &mut Vec<f64>,
+    nrdata: &mut Vec<usize>,
+) -> bool {
+    let mut best: Option<(usize, usize, usize, f64)> = None; // (interval, count, begin, fp)
+    let mut fpmax = 0.0;
+    let mut jbegin = 0usize; // 0-based index of the interval's left data point
+    for j in 0..nrdata.len() {
+        let jpoint = nrdata[j];
+        if !(fpmax >= fpint[j] || jpoint == 0) {
+            fpmax = fpint[j];
+            best = Some((j, jpoint, jbegin, fpint[j]));
+        }
+        jbegin += jpoint + 1;
+    }
+    let Some((number, maxpt, maxbeg, fpmax)) = best else {
+        return false;
+    };
+    let ihalf = maxpt / 2 + 1;
+    let nrx = maxbeg + ihalf;
+    let left = ihalf - 1;
+    let right = maxpt - ihalf;
+    nrdata[number] = left;
+    nrdata.insert(number + 1, right);
+    fpint[number] = fpmax * left as f64 / maxpt as f64;
+    fpint.insert(number + 1, fpmax * right as f64 / maxpt as f64);
+    interior.insert(number, u[nrx]);
+    true
+}
+
+/// Fits the smoothing spline of `splprep(points.T, s=s, k=min(3, m - 1))` (unit weights,
+/// chord-length parameter) to the points after removing consecutive duplicates.
+/// Errors on fewer than 2 distinct points, non-finite input, or a negative / non-finite `s`.
+pub fn fit_spline(points: &[Point], s: f64) -> Result<SplineCurve> {
+    validate_points(points, 2, "curve")?;
+    if !(s.is_finite() && s >= 0.0) {
+        return Err(GeomError::InvalidParameter {
+            name: "s",
+            reason: format!("must be finite and >= 0, got {s}"),
+        });
+    }
+    let pts = dedup(points, DEDUP_EPS, false);
+    let total = polyline_length(&pts, false);
+    if !total.is_finite() {
+        return Err(GeomError::NonFinite {
+            what: "curve length (coordinates too large)".into(),
+        });
+    }
+    if pts.len() < 2 || (pts[pts.len() - 1] - pts[pts.len() - 2]).norm() <= DEDUP_EPS {
+        return Err(GeomError::Degenerate {
+            what: "curve".into(),
+            reason: "fewer than 2 distinct points".into(),
+        });
+    }
+    let m = pts.len();
+    let k = 3.min(m - 1);
+    let cum = cumulative_lengths(&pts);
+    let mut u: Vec<f64> = cum.iter().map(|c| c / total).collect();
+    u[m - 1] = 1.0;
+    let x: Vec<[f64; 2]> = pts.iter().map(|p| [p.x, p.y]).collect();
+    let curve = fit_parametric(&u, &x, k, s);
+    if !curve.coeffs.iter().flatten().all(|c| c.is_finite()) {
+        return Err(GeomError::Degenerate {
+            what: "curve".into(),
+            reason: "the spline system is singular".into(),
+        });
+    }
+    Ok(curve)
+}
+
+fn make_curve(t: Vec<f64>, c: [Vec<f64>; 2], k: usize, u: &[f64], fp: f64) -> SplineCurve {
+    SplineCurve {
+        knots: t,
+        coeffs: c,
+        degree: k,
+        params: u.to_vec(),
+        residual: fp,
+    }
+}
+
+/// FITPACK `fppara` with `iopt = 0`, unit weights, `idim = 2`.
+fn fit_parametric(u: &[f64], x: &[[f64; 2]], k: usize, s: f64) -> SplineCurve {
+    let m = u.len();
+    let (k1, k2) = (k + 1, k + 2);
+    let nmin = 2 * k1;
+    let nmax = m + k1;
+    let acc = TOL * s;
+
+    if s == 0.0 {
+        let t = full_knots(&interpolation_knots(u, k), k);
+        let des = design(&t, k, u);
+        let fit = lsq_fit(&t, k, u, x, &des);
+        return make_curve(t, fit.c, k, u, fit.fp);
+    }
+
+    // Part 1: knots.
+    let mut interior: Vec<f64> = Vec::new();
+    let mut fpint: Vec<f64> = vec![0.0];
+    let mut nrdata: Vec<usize> = vec![m - 2];
+    let mut fpold = 0.0;
+    let mut fp0 = 0.0;
+    let mut nplus = 0usize;
+    let mut interpolating = false;
+    let (t, des, fit, fpms) = loop {
+        let t = full_knots(&interior, k);
+        let n = t.len();
+        let first = n == nmin;
+        let des = design(&t, k, u);
+        let fit = lsq_fit(&t, k, u, x, &des);
+        let fp = fit.fp;
+        if first {
+            fp0 = fp;
+        }
+        let fpms = fp - s;
+        if fpms.abs() < acc || (fpms < 0.0 && first) || n >= nmax || interpolating {
+            // Accepted least-squares fit: within tolerance, the polynomial already smooth enough,
+            // or the interpolating spline (n = nmax).
+            if fpms < 0.0 && !first && fpms.abs() >= acc {
+                break (t, des, fit, fpms);
+            }
+            return make_curve(t, fit.c, k, u, fp);
+        }
+        if fpms < 0.0 {
+            break (t, des, fit, fpms);
+        }
+        // Number of knots to add.
+        if first {
+            nplus = 1;
+        } else {
+            let mut npl1 = nplus * 2;
+            if fpold - fp > acc {
+                npl1 = (nplus as f64 * fpms / (fpold - fp)) as usize;
+            }
+            nplus = (nplus * 2).min(npl1.max(nplus / 2).max(1));
+        }
+        fpold = fp;
+        // Residual sums per knot interval (a point past a knot is shared half-half).
+        let nk1 = n - k1;
+        let nrint = n - nmin + 1;
+        fpint = vec![0.0; nrint];
+        let mut fpart = 0.0;
+        let mut i = 0usize;
+        let mut l = k2; // 1-based, as FITPACK
+        for it in 0..m {
+            let mut new = false;
+            if l <= nk1 && u[it] >= t[l - 1] {
+                new = true;
+                l += 1;
+            }
+            let term = residual2(&fit.c, k, &des, x, it);
+            fpart += term;
+            if new {
+                let store = 0.5 * term;
+                fpint[i] = fpart - store;
+                i += 1;
+                fpart = store;
+            }
+        }
+        fpint[nrint - 1] = fpart;
+        for _ in 0..nplus {
+            if !add_knot(u, &mut interior, &mut fpint, &mut nrdata) || interior.len() + nmin >= nmax
+            {
+                interior = interpolation_knots(u, k);
+                interpolating = true;
+                break;
+            }
+        }
+    };
+
+    // Part 2: smoothing weight p with fp(p) = s on the fixed knots.
+    let n = t.len();
+    let nk1 = n - k1;
+    let n8 = n - nmin;
+    let b = discontinuity_jumps(&t, k);
+    let (mut p1, mut f1, mut p3, mut f3) = (0.0, fp0 - s, -1.0, fpms);
+    let diag: f64 = fit.r.iter().map(|r| r[0]).sum();
+    let mut p = nk1 as f64 / diag;
+    let (mut ich1, mut ich3) = (false, false);
+    let mut best = (fit.c.clone(), fit.fp);
+    for iter in 1..=MAXIT {
+        let pinv = 1.0 / p;
+        let mut g = fit.r.clone();
+        let mut c = fit.z.clone();
+        for (it, brow) in b.iter().enumerate() {
+            let mut h = [0.0; 6];
+            for j in 0..k2 {
+                h[j] = brow[j] * pinv;
+            }
+            let mut xi = [0.0; 2];
+            for j in it..nk1 {
+                let (cos, sin) = givens(h[0], &mut g[j][0]);
+                for d in 0..2 {
+                    rotate(cos, sin, &mut xi[d], &mut c[d][j]);
+                }
+                if j == nk1 - 1 {
+                    break;
+                }
+                let i2 = if j >= n8 { nk1 - 1 - j } else { k1 };
+                for i in 1..=i2 {
+                    rotate(cos, sin, &mut h[i], &mut g[j][i]);
+                    h[i - 1] = h[i];
+                }
+                h[i2] = 0.0;
+            }
+        }
+        let c = [
+            back_substitute(&g, &c[0], k2),
+            back_substitute(&g, &c[1], k2),
+        ];
+        let fp: f64 = (0..m).map(|it| residual2(&c, k, &des, x, it)).sum();
+        best = (c, fp);
+        let fpms = fp - s;
+        if fpms.abs() < acc || iter == MAXIT {
+            break;
+        }
+        let (p2, f2) = (p, fpms);
+        if !ich3 {
+            if f2 - f3 <= acc {
+                // The initial p was too large.
+                p3 = p2;
+                f3 = f2;
+                p *= 0.04;
+                if p <= p1 {
+                    p = p1 * 0.9 + p2 * 0.1;
+                }
+                continue;
+            }
+            if f2 < 0.0 {
+                ich3 = true;
+            }
+        }
+        if !ich1 {
+            if f1 - f2 <= acc {
+                // The initial p was too small.
+                p1 = p2;
+                f1 = f2;
+                p /= 0.04;
+                if p3 >= 0.0 && p >= p3 {
+                    p = p2 * 0.1 + p3 * 0.9;
+                }
+                continue;
+            }
+            if f2 > 0.0 {
+                ich1 = true;
+            }
+        }
+        if f2 >= f1 || f2 <= f3 {
+            break;
+        }
+        p = rational_step(&mut p1, &mut f1, p2, f2, &mut p3, &mut f3);
+    }
+    make_curve(t, best.0, k, u, best.1)
+}
+
+/// Adds the curve points between `(ua, pa)` (already pushed) and `(ub, pb)` (pushed last) by
+/// bisection until every chord is at most `h` long and its midpoint bulge at most `h / 16`.
+#[allow(clippy::too_many_arguments)]
+fn refine(
+    curve: &SplineCurve,
+    ua: f64,
+    pa: Point,
+    ub: f64,
+    pb: Point,
+    h: f64,
+    depth: u32,
+    us: &mut Vec<f64>,
+    pts: &mut Vec<Point>,
+) {
+    let um = 0.5 * (ua + ub);
+    let pm = curve.eval(um);
+    let chord = (pb - pa).norm();
+    let bulge = (pm - (pa + (pb - pa) * 0.5)).norm();
+    if depth < 40 && (chord > h || bulge > h / 16.0) && us.len() < MAX_RESAMPLE_POINTS {
+        refine(curve, ua, pa, um, pm, h, depth + 1, us, pts);
+        refine(curve, um, pm, ub, pb, h, depth + 1, us, pts);
+    } else {
+        us.push(ub);
+        pts.push(pb);
+    }
+}
+
+/// A dense evaluation of the curve, adaptive in the parameter so that the polyline follows the
+/// curve closely wherever it is fast (loops of a nearly interpolating fit): chords at most `h`.
+/// Returns (parameters, points, cumulative lengths).
+fn dense_eval(curve: &SplineCurve, h: f64) -> (Vec<f64>, Vec<Point>, Vec<f64>) {
+    // Start nodes: the data parameters plus a uniform grid of 64.
+    let mut nodes: Vec<f64> = curve.params.clone();
+    nodes.extend((0..=64).map(|j| j as f64 / 64.0));
+    nodes.sort_by(f64::total_cmp);
+    nodes.dedup();
+    let mut us = vec![nodes[0]];
+    let mut pts = vec![curve.eval(nodes[0])];
+    for w in nodes.windows(2) {
+        let pa = pts[pts.len() - 1];
+        refine(
+            curve,
+            w[0],
+            pa,
+            w[1],
+            curve.eval(w[1]),
+            h,
+            0,
+            &mut us,
+            &mut pts,
+        );
+    }
+    let cum = cumulative_lengths(&pts);
+    (us, pts, cum)
+}
 
 /// Fits a smoothing parametric cubic spline to `points` and returns it evaluated about `spacing`
 /// metres apart (ends included).
@@ -9,7 +594,196 @@ use crate::types::Point;
 /// Semantics of scipy `splprep(..., s=s, k=3)`: chord-length parameter on [0, 1], unit weights, the
 /// smoothest spline whose sum of squared residuals is at most `s`. Duplicate consecutive points are
 /// removed first. With 2 or 3 distinct points the degree drops (k = min(3, m - 1)).
+///
+/// The output has `max(2, ceil(L / spacing) + 1)` points evenly spaced by the arc length `L` of the
+/// spline (measured on a dense evaluation adaptive in the parameter, chords <= `spacing / 16`); every output
+/// point lies exactly on the spline (its parameter is interpolated from the dense evaluation), the first
+/// and last are the spline's ends `S(0)`, `S(1)`. Errors as [`fit_spline`] and on a non-positive
+/// or non-finite `spacing`.
 pub fn fit_curve(points: &[Point], s: f64, spacing: f64) -> Result<Vec<Point>> {
-    let _ = (points, s, spacing);
-    todo!("fit.rs: fit_curve")
+    if !(spacing.is_finite() && spacing > 0.0) {
+        return Err(GeomError::InvalidParameter {
+            name: "spacing",
+            reason: format!("must be finite and > 0, got {spacing}"),
+        });
+    }
+    let curve = fit_spline(points, s)?;
+    let chord = polyline_length(points, false);
+    if !(chord / spacing < MAX_RESAMPLE_POINTS as f64 / 64.0) {
+        return Err(GeomError::InvalidParameter {
+            name: "spacing",
+            reason: format!("length {chord} / spacing {spacing} gives too many points"),
+        });
+    }
+    let (us, _, cum) = dense_eval(&curve, spacing / 16.0);
+    let dense_n = us.len();
+    let len = cum[dense_n - 1];
+    if !(len.is_finite() && len > 0.0) {
+        return Err(GeomError::Degenerate {
+            what: "fitted curve".into(),
+            reason: "zero length".into(),
+        });
+    }
+    // Tolerance on the ratio: a length of exactly k spacings (up to rounding) gives k + 1 points.
+    let ratio = (len / spacing * (1.0 - 1e-9)).ceil();
+    if !(ratio < MAX_RESAMPLE_POINTS as f64) {
+        return Err(GeomError::InvalidParameter {
+            name: "spacing",
+            reason: format!("length {len} / spacing {spacing} gives too many points"),
+        });
+    }
+    let count = (ratio as usize + 1).max(2);
+    let mut out = Vec::with_capacity(count);
+    let mut seg = 0usize;
+    for i in 0..count {
+        let target = len * i as f64 / (count - 1) as f64;
+        while seg + 2 < dense_n && cum[seg + 1] < target {
+            seg += 1;
+        }
+        let dl = cum[seg + 1] - cum[seg];
+        let f = if dl > 0.0 {
+            ((target - cum[seg]) / dl).clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
+        out.push(curve.eval(us[seg] + f * (us[seg + 1] - us[seg])));
+    }
+    Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    fn p(x: f64, y: f64) -> Point {
+        Point::new(x, y)
+    }
+
+    /// A noisy arc with deterministic pseudo-noise.
+    fn noisy_arc(m: usize, noise: f64) -> Vec<Point> {
+        (0..m)
+            .map(|i| {
+                let a = i as f64 / (m - 1) as f64 * 1.5;
+                let e = ((i * 7919 % 101) as f64 / 101.0 - 0.5) * 2.0 * noise;
+                let r = 20.0 + e;
+                p(r * a.cos(), r * a.sin())
+            })
+            .collect()
+    }
+
+    #[test]
+    fn interpolation_passes_through_points() {
+        let pts = noisy_arc(12, 0.3);
+        let c = fit_spline(&pts, 0.0).unwrap();
+        for (q, &u) in pts.iter().zip(&c.params) {
+            assert!((c.eval(u) - q).norm() < 1e-9);
+        }
+    }
+
+    #[test]
+    fn smoothing_meets_s() {
+        let pts = noisy_arc(60, 0.3);
+        for s in [0.5, 2.0, 5.0] {
+            let c = fit_spline(&pts, s).unwrap();
+            assert!(
+                (c.residual - s).abs() <= TOL * s * 1.0001 || c.knots.len() == 8,
+                "fp {} s {}",
+                c.residual,
+                s
+            );
+        }
+        // A huge s gives the least-squares cubic polynomial (no interior knots).
+        let c = fit_spline(&pts, 1e6).unwrap();
+        assert_eq!(c.knots.len(), 8);
+    }
+
+    #[test]
+    fn straight_line_stays_straight() {
+        let pts: Vec<Point> = (0..20).map(|i| p(i as f64, 2.0 * i as f64)).collect();
+        let out = fit_curve(&pts, 0.5, 1.0).unwrap();
+        let len = 19.0 * 5f64.sqrt();
+        assert_eq!(out.len(), (len.ceil() as usize) + 1);
+        assert!((out[0] - pts[0]).norm() < 1e-9 && (out[out.len() - 1] - pts[19]).norm() < 1e-9);
+        assert!(out.iter().all(|q| (q.y - 2.0 * q.x).abs() < 1e-9));
+        let gaps: Vec<f64> = out.windows(2).map(|w| (w[1] - w[0]).norm()).collect();
+        assert!(gaps
+            .iter()
+            .all(|g| (g - len / (out.len() - 1) as f64).abs() < 1e-6));
+    }
+
+    #[test]
+    fn few_points_lower_degree() {
+        let two = [p(0.0, 0.0), p(3.0, 4.0)];
+        assert_eq!(fit_spline(&two, 0.5).unwrap().degree, 1);
+        let out = fit_curve(&two, 0.5, 1.0).unwrap();
+        assert_eq!(out.len(), 6);
+        let three = [p(0.0, 0.0), p(1.0, 1.0), p(1.0, 1.0), p(2.0, 0.0)];
+        let c = fit_spline(&three, 0.0).unwrap();
+        assert_eq!(c.degree, 2);
+        assert!((c.eval(0.5) - p(1.0, 1.0)).norm() < 1e-12);
+        let four = [p(0.0, 0.0), p(1.0, 1.0), p(2.0, 0.0), p(3.0, 1.0)];
+        assert_eq!(fit_spline(&four, 0.1).unwrap().degree, 3);
+    }
+
+    #[test]
+    fn errors() {
+        let pts = noisy_arc(10, 0.1);
+        assert!(matches!(
+            fit_curve(&pts, -1.0, 1.0),
+            Err(GeomError::InvalidParameter { name: "s", .. })
+        ));
+        assert!(matches!(
+            fit_curve(&pts, f64::NAN, 1.0),
+            Err(GeomError::InvalidParameter { name: "s", .. })
+        ));
+        assert!(matches!(
+            fit_curve(&pts, 0.5, 0.0),
+            Err(GeomError::InvalidParameter {
+                name: "spacing",
+                ..
+            })
+        ));
+        assert!(matches!(
+            fit_curve(&[], 0.5, 1.0),
+            Err(GeomError::TooFewPoints { .. })
+        ));
+        assert!(matches!(
+            fit_curve(&[p(1.0, 1.0)], 0.5, 1.0),
+            Err(GeomError::TooFewPoints { .. })
+        ));
+        assert!(matches!(
+            fit_curve(&[p(1.0, 1.0), p(1.0, 1.0)], 0.5, 1.0),
+            Err(GeomError::Degenerate { .. })
+        ));
+        assert!(matches!(
+            fit_curve(&[p(1.0, f64::NAN), p(1.0, 1.0)], 0.5, 1.0),
+            Err(GeomError::NonFinite { .. })
+        ));
+    }
+
+    proptest! {
+        #[test]
+        fn prop_fit_finite_and_close(v in prop::collection::vec((-0.5f64..0.5, -0.5f64..0.5), 2..60), s in 0.0f64..5.0, spacing in 0.3f64..3.0) {
+            // Noisy samples along a gentle curve.
+            let pts: Vec<Point> = v.iter().enumerate().map(|(i, (a, b))| p(i as f64 + a, 0.02 * (i * i) as f64 + b)).collect();
+            let c = fit_spline(&pts, s).unwrap();
+            prop_assert!(c.residual <= s * (1.0 + TOL) + 1e-9 || c.knots.len() >= pts.len() + c.degree + 1 - 1);
+            let out = fit_curve(&pts, s, spacing).unwrap();
+            prop_assert!(out.len() >= 2);
+            prop_assert!(out.iter().all(|q| q.x.is_finite() && q.y.is_finite()));
+            // Evenly spaced: all gaps within a few percent of each other (chords of a smooth curve).
+            let gaps: Vec<f64> = out.windows(2).map(|w| (w[1] - w[0]).norm()).collect();
+            let max = gaps.iter().cloned().fold(0.0, f64::max);
+            prop_assert!(max <= spacing * 1.01 + 1e-9, "max gap {} spacing {} n {} knots {}", max, spacing, out.len(), c.knots.len());
+        }
+
+        #[test]
+        fn prop_no_panic_arbitrary(v in prop::collection::vec((any::<f64>(), any::<f64>()), 0..8), s in any::<f64>(), sp in any::<f64>()) {
+            let pts: Vec<Point> = v.into_iter().map(|(x, y)| p(x, y)).collect();
+            if let Ok(out) = fit_curve(&pts, s, sp) {
+                prop_assert!(out.iter().all(|q| q.x.is_finite() && q.y.is_finite()));
+            }
+        }
+    }
 }
