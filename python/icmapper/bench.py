@@ -315,6 +315,8 @@ class SizeResult:
     reference_ms: float | None
     mean_k: float
     ids_agree: str
+    engine_sample_ms: float
+    reference_sample_ms: float | None
 
 
 def _bench_size(n: int, frames: int, ref_frames: int, seed: int) -> SizeResult:
@@ -333,27 +335,37 @@ def _bench_size(n: int, frames: int, ref_frames: int, seed: int) -> SizeResult:
 
     ks: list[int] = []
     engine_ids: list[list[int]] = []
+    t_sample = 0.0
     t0 = time.perf_counter()
     for pose, det in zip(poses, dets, strict=True):
+        t1 = time.perf_counter()
         ids, _cls, _pts, _mask = gm.sample_patch(pose, RANGE, margin=MARGIN, n_points=N_POINTS)
+        t_sample += time.perf_counter() - t1
         for i, d in det:
             gm.merge(i, d, frame=1)
         ks.append(len(ids))
         engine_ids.append(ids.tolist())
     engine_ms = (time.perf_counter() - t0) / frames * 1e3
+    engine_sample_ms = t_sample / frames * 1e3
 
-    reference_ms, agree = None, "-"
+    reference_ms, reference_sample_ms, agree = None, None, "-"
     if ref is not None:
         same = 0
+        t_sample = 0.0
         t0 = time.perf_counter()
         for f in range(ref_frames):
+            t1 = time.perf_counter()
             ids, _cls, _pts, _mask = ref.sample_patch(poses[f])
+            t_sample += time.perf_counter() - t1
             for i, d in dets[f]:
                 ref.merge(i, d)
             same += ids.tolist() == engine_ids[f]
         reference_ms = (time.perf_counter() - t0) / ref_frames * 1e3
+        reference_sample_ms = t_sample / ref_frames * 1e3
         agree = f"{same}/{ref_frames}"
-    return SizeResult(n, engine_ms, reference_ms, float(np.mean(ks)), agree)
+    return SizeResult(
+        n, engine_ms, reference_ms, float(np.mean(ks)), agree, engine_sample_ms, reference_sample_ms
+    )
 
 
 def add_geometry_arguments(parser: argparse.ArgumentParser) -> None:
@@ -378,9 +390,11 @@ def run_geometry(args: argparse.Namespace) -> int:
         f"{MARGIN:.0f} m margin, {N_POINTS} points/instance) + ~{N_DETECTIONS} merges "
         f"(s={SMOOTHING}, spacing={SPACING} m)"
     )
+    print("times per frame; 'sample' = the query + clip + sample part alone (no merges)")
     print(
         f"{'instances':>10} {'in patch':>9} {'icmapper ms':>12} {'shapely ms':>11} "
-        f"{'ratio':>7} {'ids agree':>10}"
+        f"{'ratio':>7} {'sample: icmapper ms':>20} {'shapely ms':>11} {'ratio':>7} "
+        f"{'ids agree':>10}"
     )
     results: list[SizeResult] = []
     for n in args.sizes:
@@ -390,8 +404,14 @@ def run_geometry(args: argparse.Namespace) -> int:
         ratio = (
             f"{r.reference_ms / r.engine_ms:6.1f}x" if r.reference_ms is not None else f"{'-':>7}"
         )
+        if r.reference_sample_ms is not None:
+            sref = f"{r.reference_sample_ms:11.2f}"
+            sratio = f"{r.reference_sample_ms / r.engine_sample_ms:6.1f}x"
+        else:
+            sref, sratio = f"{'-':>11}", f"{'-':>7}"
         print(
-            f"{r.n:>10} {r.mean_k:9.1f} {r.engine_ms:12.3f} {ref} {ratio} {r.ids_agree:>10}",
+            f"{r.n:>10} {r.mean_k:9.1f} {r.engine_ms:12.3f} {ref} {ratio} "
+            f"{r.engine_sample_ms:20.3f} {sref} {sratio} {r.ids_agree:>10}",
             flush=True,
         )
     by_n = {r.n: r for r in results}
