@@ -154,16 +154,16 @@ fn design(t: &[f64], k: usize, u: &[f64]) -> Design {
     Design { interval, basis }
 }
 
-fn lsq_fit(t: &[f64], k: usize, u: &[f64], x: &[[f64; 2]], des: &Design) -> LsqFit {
+fn lsq_fit(t: &[f64], k: usize, x: &[[f64; 2]], des: &Design) -> LsqFit {
     let k1 = k + 1;
     let nk1 = t.len() - k1;
     let mut r = vec![[0.0; 5]; nk1];
     let mut z = [vec![0.0; nk1], vec![0.0; nk1]];
     let mut fp = 0.0;
-    for it in 0..u.len() {
-        let mut h = des.basis[it];
-        let mut xi = x[it];
-        let j0 = des.interval[it] - k;
+    for ((basis, xy), &l) in des.basis.iter().zip(x).zip(&des.interval) {
+        let mut h = *basis;
+        let mut xi = *xy;
+        let j0 = l - k;
         for i in 0..k1 {
             let piv = h[i];
             if piv == 0.0 {
@@ -216,14 +216,13 @@ fn discontinuity_jumps(t: &[f64], k: usize) -> Vec<[f64; 6]> {
             h[j + k1] = tt(l) - tt(l + j);
         }
         let mut row = [0.0; 6];
-        let mut lp = l - k1;
         for (j, cell) in row.iter_mut().enumerate().take(k2) {
+            let lp = l - k1 + j;
             let mut prod = h[j + 1];
             for i in 1..=k {
                 prod *= h[j + 1 + i] * fac;
             }
             *cell = (tt(lp + k1) - tt(lp)) / prod;
-            lp += 1;
         }
         rows.push(row);
     }
@@ -369,7 +368,7 @@ fn fit_parametric(u: &[f64], x: &[[f64; 2]], k: usize, s: f64) -> SplineCurve {
     if s == 0.0 {
         let t = full_knots(&interpolation_knots(u, k), k);
         let des = design(&t, k, u);
-        let fit = lsq_fit(&t, k, u, x, &des);
+        let fit = lsq_fit(&t, k, x, &des);
         return make_curve(t, fit.c, k, u, fit.fp);
     }
 
@@ -386,7 +385,7 @@ fn fit_parametric(u: &[f64], x: &[[f64; 2]], k: usize, s: f64) -> SplineCurve {
         let n = t.len();
         let first = n == nmin;
         let des = design(&t, k, u);
-        let fit = lsq_fit(&t, k, u, x, &des);
+        let fit = lsq_fit(&t, k, x, &des);
         let fp = fit.fp;
         if first {
             fp0 = fp;
@@ -421,9 +420,9 @@ fn fit_parametric(u: &[f64], x: &[[f64; 2]], k: usize, s: f64) -> SplineCurve {
         let mut fpart = 0.0;
         let mut i = 0usize;
         let mut l = k2; // 1-based, as FITPACK
-        for it in 0..m {
+        for (it, &ui) in u.iter().enumerate() {
             let mut new = false;
-            if l <= nk1 && u[it] >= t[l - 1] {
+            if l <= nk1 && ui >= t[l - 1] {
                 new = true;
                 l += 1;
             }
@@ -609,7 +608,7 @@ pub fn fit_curve(points: &[Point], s: f64, spacing: f64) -> Result<Vec<Point>> {
     }
     let curve = fit_spline(points, s)?;
     let chord = polyline_length(points, false);
-    if !(chord / spacing < MAX_RESAMPLE_POINTS as f64 / 64.0) {
+    if !(chord / spacing).is_finite() || chord / spacing >= MAX_RESAMPLE_POINTS as f64 / 64.0 {
         return Err(GeomError::InvalidParameter {
             name: "spacing",
             reason: format!("length {chord} / spacing {spacing} gives too many points"),
@@ -626,7 +625,7 @@ pub fn fit_curve(points: &[Point], s: f64, spacing: f64) -> Result<Vec<Point>> {
     }
     // Tolerance on the ratio: a length of exactly k spacings (up to rounding) gives k + 1 points.
     let ratio = (len / spacing * (1.0 - 1e-9)).ceil();
-    if !(ratio < MAX_RESAMPLE_POINTS as f64) {
+    if !ratio.is_finite() || ratio >= MAX_RESAMPLE_POINTS as f64 {
         return Err(GeomError::InvalidParameter {
             name: "spacing",
             reason: format!("length {len} / spacing {spacing} gives too many points"),

@@ -1,22 +1,381 @@
 //! Merging a detection into a global instance (Algorithm 2 of IC-Mapper).
+//!
+//! Polylines: the detection is located along the global polyline by projecting its points onto it
+//! (arc length `s`, extended beyond the ends along the end segments), oriented so that its `s`
+//! grows, and spliced in: the global points outside the detection's `s`-interval (with a margin
+//! of half a spacing, to avoid near-duplicate points across the junction) before it, the detection,
+//! the global points after it. The spliced list is fitted with the smoothing spline of
+//! [`crate::fit::fit_curve`]. Crossings: polygon union, or the convex hull when the union falls
+//! apart.
 
-use crate::error::Result;
-use crate::types::Point;
+use crate::error::{GeomError, Result};
+use crate::fit::fit_curve;
+use crate::resample::{cumulative_lengths, dedup, resample_spacing};
+use crate::types::{validate_points, Point};
+use crate::union::polygon_union;
+use nalgebra::Vector2;
+
+/// Consecutive points closer than this (metres) are merged before merging.
+const DEDUP_EPS: f64 = 1e-9;
+
+/// Projection of `p` onto the polyline `g` (cumulative lengths `cum`): the arc length of the
+/// nearest point, extended linearly beyond the ends along the end segments (negative before the
+/// start, beyond the length after the end), and the unit tangent there.
+fn project(g: &[Point], cum: &[f64], p: &Point) -> (f64, Vector2<f64>) {
+    let nseg = g.len() - 1;
+    let mut best = (f64::INFINITY, 0.0, Vector2::new(1.0, 0.0));
+    for i in 0..nseg {
+        let d = g[i + 1] - g[i];
+        let len = cum[i + 1] - cum[i];
+        if len <= 0.0 {
+            continue;
+        }
+        let t_raw = (p - g[i]).dot(&d) / (len * len);
+        let t = t_raw.clamp(0.0, 1.0);
+        let dist2 = (p - (g[i] + d * t)).norm_squared();
+        if dist2 < best.0 {
+            let t_ext = if (i == 0 && t_raw < 0.0) || (i == nseg - 1 && t_raw > 1.0) {
+                t_raw
+            } else {
+                t
+            };
+            best = (dist2, cum[i] + t_ext * len, d / len);
+        }
+    }
+    (best.1, best.2)
+}
 
 /// Merges a detected polyline into a global polyline (both world frame): decides the orientation of
 /// the detection from the geometry, reorders and concatenates (cases: partial overlap, one
 /// containing the other, end-to-end continuation, reversed direction), fits a smoothing spline with
 /// parameter `s` ([`crate::fit::fit_curve`]) and resamples about `spacing` apart. The result keeps the
 /// global instance's direction.
-pub fn merge_polyline(global: &[Point], detected: &[Point], s: f64, spacing: f64) -> Result<Vec<Point>> {
-    let _ = (global, detected, s, spacing);
-    todo!("merge.rs: merge_polyline")
+///
+/// Orientation: the detection is reversed when its segments run against the global tangent at
+/// their projections (length-weighted dot products; ties broken by the projected end positions).
+/// The detection replaces the overlapped part of the global polyline. A zero-length global
+/// polyline is replaced by the detection. Errors on fewer than 2 points, non-finite input, a
+/// negative `s`, a non-positive `spacing`, or an all-degenerate input.
+pub fn merge_polyline(
+    global: &[Point],
+    detected: &[Point],
+    s: f64,
+    spacing: f64,
+) -> Result<Vec<Point>> {
+    validate_points(global, 2, "global polyline")?;
+    validate_points(detected, 2, "detected polyline")?;
+    if !(s.is_finite() && s >= 0.0) {
+        return Err(GeomError::InvalidParameter {
+            name: "s",
+            reason: format!("must be finite and >= 0, got {s}"),
+        });
+    }
+    if !(spacing.is_finite() && spacing > 0.0) {
+        return Err(GeomError::InvalidParameter {
+            name: "spacing",
+            reason: format!("must be finite and > 0, got {spacing}"),
+        });
+    }
+    let g = dedup(global, DEDUP_EPS, false);
+    let mut d = dedup(detected, DEDUP_EPS, false);
+    let gcum = cumulative_lengths(&g);
+    if gcum[gcum.len() - 1] <= DEDUP_EPS {
+        return fit_curve(&d, s, spacing);
+    }
+    let proj: Vec<(f64, Vector2<f64>)> = d.iter().map(|p| project(&g, &gcum, p)).collect();
+    // Orientation of the detection relative to the global polyline.
+    let mut score = 0.0;
+    for j in 0..d.len() - 1 {
+        let mid = d[j] + (d[j + 1] - d[j]) * 0.5;
+        let (_, tangent) = project(&g, &gcum, &mid);
+        score += (d[j + 1] - d[j]).dot(&tangent);
+    }
+    let (s_first, s_last) = (proj[0].0, proj[proj.len() - 1].0);
+    let reverse = if score != 0.0 {
+        score < 0.0
+    } else {
+        s_last < s_first
+    };
+    let mut sd: Vec<f64> = proj.iter().map(|x| x.0).collect();
+    if reverse {
+        d.reverse();
+        sd.reverse();
+    }
+    let s_lo = sd.iter().cloned().fold(f64::INFINITY, f64::min);
+    let s_hi = sd.iter().cloned().fold(f64::NEG_INFINITY, f64::max);
+    let margin = 0.5 * spacing;
+    let mut combined: Vec<Point> = Vec::with_capacity(g.len() + d.len());
+    combined.extend(
+        g.iter()
+            .zip(&gcum)
+            .filter(|(_, &c)| c < s_lo - margin)
+            .map(|(p, _)| *p),
+    );
+    combined.extend_from_slice(&d);
+    combined.extend(
+        g.iter()
+            .zip(&gcum)
+            .filter(|(_, &c)| c > s_hi + margin)
+            .map(|(p, _)| *p),
+    );
+    fit_curve(&combined, s, spacing)
+}
+
+/// Convex hull (Andrew's monotone chain), counter-clockwise, without collinear points.
+fn convex_hull(points: &[Point]) -> Vec<Point> {
+    let mut pts = points.to_vec();
+    pts.sort_by(|a, b| a.x.total_cmp(&b.x).then(a.y.total_cmp(&b.y)));
+    pts.dedup();
+    if pts.len() < 3 {
+        return pts;
+    }
+    let cross =
+        |o: &Point, a: &Point, b: &Point| (a.x - o.x) * (b.y - o.y) - (a.y - o.y) * (b.x - o.x);
+    let mut hull: Vec<Point> = Vec::with_capacity(2 * pts.len());
+    for pass in 0..2 {
+        let start = hull.len();
+        let iter: Box<dyn Iterator<Item = &Point>> = if pass == 0 {
+            Box::new(pts.iter())
+        } else {
+            Box::new(pts.iter().rev())
+        };
+        for p in iter {
+            while hull.len() >= start + 2
+                && cross(&hull[hull.len() - 2], &hull[hull.len() - 1], p) <= 0.0
+            {
+                hull.pop();
+            }
+            hull.push(*p);
+        }
+        hull.pop();
+    }
+    hull
 }
 
 /// Merges a detected crossing into a global crossing by polygon union; returns the new outer ring
 /// resampled about `spacing` apart along the contour. If the union falls apart (disjoint
 /// polygons), the convex hull of both is stored so that no area is lost (documented behaviour).
+/// If one ring has no area, the union is the other one. Errors on rings with fewer than 3 points,
+/// non-finite input, a non-positive `spacing`, or when both rings have no area.
 pub fn merge_polygon(global: &[Point], detected: &[Point], spacing: f64) -> Result<Vec<Point>> {
-    let _ = (global, detected, spacing);
-    todo!("merge.rs: merge_polygon")
+    if !(spacing.is_finite() && spacing > 0.0) {
+        return Err(GeomError::InvalidParameter {
+            name: "spacing",
+            reason: format!("must be finite and > 0, got {spacing}"),
+        });
+    }
+    let union = polygon_union(&[global.to_vec(), detected.to_vec()])?;
+    let ring = match union.len() {
+        0 => {
+            return Err(GeomError::Degenerate {
+                what: "crossing merge".into(),
+                reason: "both polygons have zero area".into(),
+            })
+        }
+        1 => union.into_iter().next().unwrap_or_default(),
+        _ => convex_hull(&[global, detected].concat()),
+    };
+    resample_spacing(&ring, spacing, true)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::clip::signed_area2;
+    use proptest::prelude::*;
+
+    fn p(x: f64, y: f64) -> Point {
+        Point::new(x, y)
+    }
+
+    /// Points along y = c from x0 to x1 every 1 m (x1 < x0 gives a reversed line).
+    fn line(x0: f64, x1: f64, c: f64) -> Vec<Point> {
+        let n = ((x1 - x0).abs().round() as usize).max(1);
+        (0..=n)
+            .map(|i| p(x0 + (x1 - x0) * i as f64 / n as f64, c))
+            .collect()
+    }
+
+    fn check(out: &[Point], first: Point, last: Point, tol: f64) {
+        assert!(
+            (out[0] - first).norm() < tol,
+            "first {:?} vs {:?}",
+            out[0],
+            first
+        );
+        assert!(
+            (out[out.len() - 1] - last).norm() < tol,
+            "last {:?} vs {:?}",
+            out[out.len() - 1],
+            last
+        );
+        // Monotone along the main direction and about 1 m apart.
+        let dir = (last - first).normalize();
+        assert!(out
+            .windows(2)
+            .all(|w| (w[1] - w[0]).dot(&dir) > 0.5 && (w[1] - w[0]).norm() <= 1.0 + 1e-6));
+    }
+
+    #[test]
+    fn partial_overlap_at_end_and_start() {
+        let g = line(0.0, 10.0, 0.0);
+        check(
+            &merge_polyline(&g, &line(8.0, 15.0, 0.1), 0.5, 1.0).unwrap(),
+            p(0.0, 0.0),
+            p(15.0, 0.1),
+            0.3,
+        );
+        check(
+            &merge_polyline(&g, &line(-5.0, 2.0, 0.1), 0.5, 1.0).unwrap(),
+            p(-5.0, 0.1),
+            p(10.0, 0.0),
+            0.3,
+        );
+    }
+
+    #[test]
+    fn reversed_detection() {
+        let g = line(0.0, 10.0, 0.0);
+        check(
+            &merge_polyline(&g, &line(15.0, 8.0, 0.1), 0.5, 1.0).unwrap(),
+            p(0.0, 0.0),
+            p(15.0, 0.1),
+            0.3,
+        );
+        // The global direction is kept when the global runs the other way.
+        let g_rev = line(10.0, 0.0, 0.0);
+        check(
+            &merge_polyline(&g_rev, &line(8.0, 15.0, 0.1), 0.5, 1.0).unwrap(),
+            p(15.0, 0.1),
+            p(0.0, 0.0),
+            0.3,
+        );
+    }
+
+    #[test]
+    fn containment_both_ways() {
+        let g = line(0.0, 10.0, 0.0);
+        let out = merge_polyline(&g, &line(3.0, 7.0, 0.2), 0.5, 1.0).unwrap();
+        check(&out, p(0.0, 0.0), p(10.0, 0.0), 0.3);
+        // The detection replaces the overlapped part: the middle follows it.
+        let mid = out
+            .iter()
+            .min_by(|a, b| (a.x - 5.0).abs().total_cmp(&(b.x - 5.0).abs()))
+            .unwrap();
+        assert!(mid.y > 0.1, "{mid:?}");
+        let out = merge_polyline(&line(3.0, 7.0, 0.0), &line(-5.0, 15.0, 0.1), 0.5, 1.0).unwrap();
+        check(&out, p(-5.0, 0.1), p(15.0, 0.1), 0.3);
+    }
+
+    #[test]
+    fn continuation_with_gap_and_curve() {
+        let g = line(0.0, 10.0, 0.0);
+        check(
+            &merge_polyline(&g, &line(13.0, 20.0, 0.0), 0.5, 1.0).unwrap(),
+            p(0.0, 0.0),
+            p(20.0, 0.0),
+            0.3,
+        );
+        check(
+            &merge_polyline(&g, &line(20.0, 13.0, 0.0), 0.5, 1.0).unwrap(),
+            p(0.0, 0.0),
+            p(20.0, 0.0),
+            0.3,
+        );
+        // A quarter circle, the detection continuing it (reversed).
+        let arc = |a0: f64, a1: f64| -> Vec<Point> {
+            (0..=20)
+                .map(|i| a0 + (a1 - a0) * i as f64 / 20.0)
+                .map(|a| p(20.0 * a.cos(), 20.0 * a.sin()))
+                .collect()
+        };
+        let out = merge_polyline(&arc(0.0, 0.8), &arc(1.5, 0.6), 0.5, 1.0).unwrap();
+        assert!(
+            (out[0] - p(20.0, 0.0)).norm() < 0.3
+                && (out[out.len() - 1] - p(20.0 * 1.5f64.cos(), 20.0 * 1.5f64.sin())).norm() < 0.3
+        );
+        assert!(out.iter().all(|q| (q.coords.norm() - 20.0).abs() < 0.2));
+    }
+
+    #[test]
+    fn polyline_errors_and_degenerate() {
+        let g = line(0.0, 10.0, 0.0);
+        assert!(merge_polyline(&g[..1], &g, 0.5, 1.0).is_err());
+        assert!(merge_polyline(&g, &[p(f64::NAN, 0.0), p(1.0, 0.0)], 0.5, 1.0).is_err());
+        assert!(merge_polyline(&g, &g, -0.5, 1.0).is_err());
+        assert!(merge_polyline(&g, &g, 0.5, 0.0).is_err());
+        // A zero-length detection is a point spliced in; a zero-length global is replaced.
+        assert!(merge_polyline(&g, &[p(5.0, 0.0), p(5.0, 0.0)], 0.5, 1.0).is_ok());
+        let out = merge_polyline(&[p(1.0, 1.0), p(1.0, 1.0)], &g, 0.5, 1.0).unwrap();
+        check(&out, p(0.0, 0.0), p(10.0, 0.0), 1e-6);
+    }
+
+    fn rect(x0: f64, y0: f64, x1: f64, y1: f64) -> Vec<Point> {
+        vec![p(x0, y0), p(x1, y0), p(x1, y1), p(x0, y1)]
+    }
+
+    #[test]
+    fn polygon_merge_union_and_hull() {
+        let out = merge_polygon(&rect(0.0, 0.0, 4.0, 3.0), &rect(2.0, 0.0, 6.0, 3.0), 1.0).unwrap();
+        assert_eq!(out.len(), 18);
+        assert!((signed_area2(&out) / 2.0 - 18.0).abs() < 1e-6);
+        // Disjoint: the convex hull of both (area 10 x 3).
+        let out =
+            merge_polygon(&rect(0.0, 0.0, 2.0, 3.0), &rect(8.0, 0.0, 10.0, 3.0), 1.0).unwrap();
+        assert!((signed_area2(&out) / 2.0 - 30.0).abs() < 1e-6);
+        assert!(merge_polygon(
+            &rect(0.0, 0.0, 2.0, 3.0),
+            &[p(0.0, 0.0), p(1.0, 0.0), p(2.0, 0.0)],
+            1.0
+        )
+        .is_ok());
+        assert!(merge_polygon(
+            &[p(0.0, 0.0), p(1.0, 0.0), p(2.0, 0.0)],
+            &[p(0.0, 0.0), p(1.0, 0.0), p(2.0, 0.0)],
+            1.0
+        )
+        .is_err());
+        assert!(merge_polygon(&rect(0.0, 0.0, 2.0, 3.0), &rect(0.0, 0.0, 2.0, 3.0), -1.0).is_err());
+    }
+
+    #[test]
+    fn hull_is_ccw_and_minimal() {
+        let pts = [
+            p(0.0, 0.0),
+            p(1.0, 0.0),
+            p(2.0, 0.0),
+            p(2.0, 2.0),
+            p(1.0, 1.0),
+            p(0.0, 2.0),
+        ];
+        let h = convex_hull(&pts);
+        assert_eq!(h, vec![p(0.0, 0.0), p(2.0, 0.0), p(2.0, 2.0), p(0.0, 2.0)]);
+    }
+
+    proptest! {
+        #[test]
+        fn prop_merge_spans_both(x0 in -20.0f64..20.0, len in 2.0f64..30.0, y in -0.3f64..0.3, rev in any::<bool>()) {
+            let g = line(0.0, 20.0, 0.0);
+            let mut d = line(x0, x0 + len, y);
+            if rev { d.reverse(); }
+            let out = merge_polyline(&g, &d, 0.5, 1.0).unwrap();
+            let lo = x0.min(0.0);
+            let hi = (x0 + len).max(20.0);
+            // Keeps the global direction and covers the union of both extents.
+            prop_assert!(out[0].x < out[out.len() - 1].x);
+            prop_assert!((out[0].x - lo).abs() < 0.5 && (out[out.len() - 1].x - hi).abs() < 0.5);
+            prop_assert!(out.iter().all(|q| q.x.is_finite() && q.y.abs() < 0.6));
+        }
+
+        #[test]
+        fn prop_no_panic_arbitrary(a in prop::collection::vec((any::<f64>(), any::<f64>()), 0..6), b in prop::collection::vec((-1e3f64..1e3, -1e3f64..1e3), 0..6)) {
+            let a: Vec<Point> = a.into_iter().map(|(x, y)| p(x, y)).collect();
+            let b: Vec<Point> = b.into_iter().map(|(x, y)| p(x, y)).collect();
+            let _ = merge_polyline(&a, &b, 0.5, 1.0);
+            let _ = merge_polyline(&b, &a, 0.5, 1.0);
+            let _ = merge_polyline(&b, &b, 0.5, 1.0);
+            let _ = merge_polygon(&a, &b, 1.0);
+            let _ = merge_polygon(&b, &b, 1.0);
+        }
+    }
 }
