@@ -10,7 +10,7 @@
 
 use crate::error::{GeomError, Result};
 use crate::fit::fit_curve;
-use crate::resample::{cumulative_lengths, dedup, resample_spacing};
+use crate::resample::{cumulative_lengths, dedup, polyline_length, resample_spacing};
 use crate::types::{validate_points, Point};
 use crate::union::polygon_union;
 use nalgebra::Vector2;
@@ -78,6 +78,12 @@ pub fn merge_polyline(
     }
     let g = dedup(global, DEDUP_EPS, false);
     let mut d = dedup(detected, DEDUP_EPS, false);
+    if d.len() < 2 || polyline_length(&d, false) <= DEDUP_EPS {
+        return Err(GeomError::Degenerate {
+            what: "detected polyline".into(),
+            reason: "all its points coincide (zero length)".into(),
+        });
+    }
     let gcum = cumulative_lengths(&g);
     if gcum[gcum.len() - 1] <= DEDUP_EPS {
         return fit_curve(&d, s, spacing);
@@ -304,8 +310,8 @@ mod tests {
         assert!(merge_polyline(&g, &[p(f64::NAN, 0.0), p(1.0, 0.0)], 0.5, 1.0).is_err());
         assert!(merge_polyline(&g, &g, -0.5, 1.0).is_err());
         assert!(merge_polyline(&g, &g, 0.5, 0.0).is_err());
-        // A zero-length detection is a point spliced in; a zero-length global is replaced.
-        assert!(merge_polyline(&g, &[p(5.0, 0.0), p(5.0, 0.0)], 0.5, 1.0).is_ok());
+        // A zero-length detection is rejected; a zero-length global is replaced.
+        assert!(merge_polyline(&g, &[p(5.0, 0.0), p(5.0, 0.0)], 0.5, 1.0).is_err());
         let out = merge_polyline(&[p(1.0, 1.0), p(1.0, 1.0)], &g, 0.5, 1.0).unwrap();
         check(&out, p(0.0, 0.0), p(10.0, 0.0), 1e-6);
     }
@@ -377,5 +383,17 @@ mod tests {
             let _ = merge_polygon(&a, &b, 1.0);
             let _ = merge_polygon(&b, &b, 1.0);
         }
+    }
+}
+
+#[cfg(test)]
+mod degenerate_tests {
+    use super::*;
+
+    #[test]
+    fn detection_with_one_distinct_point_is_rejected() {
+        let g = [Point::new(0.0, 0.0), Point::new(10.0, 0.0)];
+        let d = [Point::new(3.0, 3.0), Point::new(3.0, 3.0)];
+        assert!(matches!(merge_polyline(&g, &d, 0.5, 1.0), Err(GeomError::Degenerate { .. })));
     }
 }
