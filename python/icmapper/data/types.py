@@ -38,7 +38,8 @@ NUM_CLASSES = len(CLASS_NAMES)
 
 @dataclass(frozen=True)
 class PerceptionRange:
-    """An ego-centred, axis-aligned perception range: x in [-half_x, half_x], y in [-half_y, half_y]."""
+    """An ego-centred, axis-aligned perception range: x in [-half_x, half_x], y in
+    [-half_y, half_y]."""
 
     half_x: float
     half_y: float
@@ -149,7 +150,9 @@ class Sequence:
 
     def frame(self, i: int, with_images: bool = True) -> Frame:
         if not -len(self) <= i < len(self):
-            raise IndexError(f"frame {i} out of range for sequence {self.name!r} of {len(self)} frames")
+            raise IndexError(
+                f"frame {i} out of range for sequence {self.name!r} of {len(self)} frames"
+            )
         i %= len(self)
         images = self.render(i) if (with_images and self.render is not None) else None
         return Frame(i, float(self.timestamps[i]), self.poses[i], self.rig, images)

@@ -78,9 +78,12 @@ def polyline_chamfer_matrix(
     b: NDArray[np.floating],
     a_closed: NDArray[np.bool_],
     b_closed: NDArray[np.bool_],
+    reduce: str = "mean",
 ) -> NDArray[np.float64]:
     """Pairwise Chamfer distance between polylines/rings, measured to the lines, not the vertices:
     (mean over a's points of the distance to b's segments + the same from b to a) / 2.
+    ``reduce="min"`` takes the smaller of the two directed distances instead: ~0 when one instance
+    covers part of the other (an instance that grows or shrinks at the edge of the range).
 
     a (A, n, 2), b (B, m, 2), a_closed (A,), b_closed (B,) (rings get their closing segment) ->
     (A, B) float64. Unlike the point-to-point Chamfer, two samplings of the same line score ~0
@@ -98,6 +101,8 @@ def polyline_chamfer_matrix(
     sb = _segments(b, np.asarray(b_closed, bool))  # (B, m, 2, 2)
     ab = _mean_point_to_segments(a, sb)  # (A, B)
     ba = _mean_point_to_segments(b, sa)  # (B, A)
+    if reduce == "min":
+        return np.minimum(ab, ba.T)
     return 0.5 * (ab + ba.T)
 
 
@@ -130,14 +135,17 @@ def positional_affinity(
     trk_points: NDArray[np.floating],
     trk_classes: NDArray[np.integer],
     scale: float = DEFAULT_AFFINITY_SCALE,
+    reduce: str = "mean",
 ) -> NDArray[np.float64]:
     """Association scores from geometry alone: exp(-chamfer / scale), 0 across classes.
 
     det_points (k, n, 2), det_classes (k,), trk_points (t, m, 2), trk_classes (t,), all in the same
     (ego) frame -> (k, t) float64 in [0, 1]. The Chamfer distance is measured to the polylines
     (`polyline_chamfer_matrix`; crossings, class 0, as rings). A Chamfer gate of g metres is the
-    score threshold exp(-g / scale).
+    score threshold exp(-g / scale). ``reduce``: see `polyline_chamfer_matrix`.
     """
+    if reduce not in ("mean", "min"):
+        raise ValueError(f"positional_affinity: reduce must be 'mean' or 'min', got {reduce!r}")
     if not scale > 0:
         raise ValueError(f"positional_affinity: scale must be > 0, got {scale}")
     det_classes = np.asarray(det_classes)
@@ -153,7 +161,9 @@ def positional_affinity(
     for c in np.intersect1d(det_classes, trk_classes):  # only same-class pairs are computed
         di, ti = np.nonzero(det_classes == c)[0], np.nonzero(trk_classes == c)[0]
         closed = np.full(len(di), c == 0), np.full(len(ti), c == 0)
-        cd = polyline_chamfer_matrix(det_points[di], trk_points[ti], *closed)  # (k_c, t_c)
+        cd = polyline_chamfer_matrix(
+            det_points[di], trk_points[ti], *closed, reduce=reduce
+        )  # (k_c, t_c)
         aff[np.ix_(di, ti)] = np.exp(-cd / scale)
     return aff
 
@@ -319,6 +329,22 @@ class Tracker:
                 kept.append(tr)
         self._tracks = kept + new_tracks
         return ids
+
+    @property
+    def next_id(self) -> int:
+        """The id the next new track will get."""
+        return self._next_id
+
+    def reserve_ids(self, below: int) -> None:
+        """Makes every future new id >= `below` (continuing an existing map whose ids are used)."""
+        self._next_id = max(self._next_id, int(below))
+
+    def rename(self, track_id: int, new_id: int) -> None:
+        """Gives track `track_id` the id `new_id` (re-identification against the global map); any
+        other buffer entry holding `new_id` is dropped."""
+        tr = self.track(track_id)
+        self._tracks = [t for t in self._tracks if t.id != new_id or t is tr]
+        tr.id = int(new_id)
 
     def set_points(self, track_id: int, points_world: NDArray[np.floating]) -> None:
         """Replaces a track's stored geometry (n, 2) WORLD frame, e.g. with the fused result."""

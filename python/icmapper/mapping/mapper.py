@@ -1,0 +1,493 @@
+"""The IC-Mapper online pipeline: detect -> associate -> sample -> fuse -> merge, per frame.
+
+``Mapper`` owns all state of one sequence (detector memory, tracking buffer, global map); two
+Mappers run side by side. It runs with the learned networks (``Mapper.from_checkpoint``) or with any
+``DetectionSource`` (e.g. the noisy-GT oracle, ``Mapper.with_oracle``), in which case association
+falls back to positional affinity and fusion is skipped.
+
+Per frame (paper Fig. 2):
+1. detections above ``detect_threshold`` (all of them go to the run for AP);
+2. those above ``track_threshold`` are associated with the tracking buffer: learned scores
+   ``H`` (or positional affinity without query features), threshold θ, one-to-one assignment
+   maximising the summed score; unmatched detections get new ids;
+3. re-identification against the map (an extension, documented in docs/mapping.md): a new track
+   whose points lie within ``reid_distance`` of a same-class global instance takes that instance's
+   id, so a track lost for longer than ``max_age`` does not duplicate the map;
+4. the global map is sampled in the patch expanded by ``fusion_margin`` (Rust ``sample_patch``);
+5. fusion of every tracked detection with the history of its id;
+6. merge into the global map (curve fit for polylines, union for crossings), or insert once the
+   track has been seen in ``min_hits`` frames (tentative tracks keep one-off false positives out
+   of the map; an extension like step 3).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from icmapper.data.types import (
+    Frame,
+    PerceptionRange,
+    RANGE_60x30,
+    Sequence,
+    ego_to_world,
+    pose_to_xy_yaw,
+)
+from icmapper.mapping.tracker import (
+    Tracker,
+    _mean_point_to_segments,
+    _segments,
+    positional_affinity,
+)
+from icmapper.mapping.types import Detections, DetectionSource, StepResult
+
+if TYPE_CHECKING:
+    import torch
+
+    from icmapper._icmap import GlobalMap
+    from icmapper.models.association import AssociationHead
+    from icmapper.models.detector import MapDetector
+    from icmapper.models.fusion import FusionModule
+
+#: The stages of one step, in order (timed in ``MapperStats.seconds``).
+STAGES = ("detector", "association", "tracking", "sampling", "fusion", "merge")
+#: Stages that run neural networks (the rest is tracking and geometry).
+NETWORK_STAGES = ("detector", "association", "fusion")
+
+#: Ids of detections that are reported (score >= detect_threshold) but not tracked start here, so
+#: they never collide with track ids (the run format needs an id >= 0 for every prediction).
+UNTRACKED_ID_BASE = 1 << 40
+
+
+@dataclass(frozen=True)
+class MapperConfig:
+    """Inference settings of the online mapper (validated on construction)."""
+
+    detect_threshold: float = 0.1  # detections reported per frame (evaluated by AP)
+    track_threshold: float = 0.4  # detections associated, fused and merged into the map
+    assoc_threshold: float = 0.5  # θ: minimum association score of a match
+    max_age: int = 3  # frames a lost track stays in the buffer
+    min_hits: int = 2  # frames a new track must be seen before it enters the global map
+    positional_scale: float = 1.0  # metres; affinity exp(-chamfer/scale) without query features
+    reid_distance: float = 1.0  # metres; 0 disables re-identification against the map
+    fusion_margin: float = 20.0  # metres added around the perception range for the history
+    history_points: int = 20
+    smoothing: float = 0.5  # curve-fit s of the merge (scipy splprep semantics)
+    spacing: float = 1.0  # metres between stored map points
+    use_association: bool = True  # False: positional affinity even with query features
+    use_fusion: bool = True  # False: detections are merged as detected
+
+    def __post_init__(self) -> None:
+        for name in ("detect_threshold", "track_threshold", "assoc_threshold"):
+            v = getattr(self, name)
+            if not 0.0 <= v <= 1.0:
+                raise ValueError(f"MapperConfig.{name} must be in [0, 1], got {v}")
+        if self.track_threshold < self.detect_threshold:
+            raise ValueError("MapperConfig.track_threshold must be >= detect_threshold")
+        for name in ("positional_scale", "spacing", "history_points"):
+            if not getattr(self, name) > 0:
+                raise ValueError(f"MapperConfig.{name} must be > 0, got {getattr(self, name)}")
+        if self.min_hits < 1:
+            raise ValueError(f"MapperConfig.min_hits must be >= 1, got {self.min_hits}")
+        for name in ("max_age", "reid_distance", "fusion_margin", "smoothing"):
+            if not getattr(self, name) >= 0:
+                raise ValueError(f"MapperConfig.{name} must be >= 0, got {getattr(self, name)}")
+
+
+class NetworkDetector:
+    """The learned detector as a streaming ``DetectionSource`` (memory carried between frames).
+
+    ``temporal=False`` gives the single-frame variant (no BEV memory, no query propagation).
+    """
+
+    def __init__(
+        self, detector: MapDetector, device: str | torch.device = "cpu", temporal: bool = True
+    ):
+        import torch
+
+        self.detector = detector.eval().to(device)
+        self.device = torch.device(device)
+        self.temporal = temporal
+        self.reset()
+
+    def reset(self) -> None:
+        self._state: Any = None
+        self._prev_pose: NDArray[np.float64] | None = None
+
+    def detect(self, frame: Frame) -> Detections:
+        import torch
+
+        if frame.images is None:
+            raise ValueError(f"frame {frame.index} has no images: the learned detector needs them")
+        imgs = np.asarray(frame.images)
+        rig = frame.rig
+        if imgs.ndim != 4 or imgs.shape[0] != rig.num_cameras or imgs.shape[1] != 3:
+            raise ValueError(
+                f"frame {frame.index}: images must be ({rig.num_cameras}, 3, H, W), "
+                f"got {imgs.shape}"
+            )
+        pose = np.asarray(frame.pose, dtype=np.float64)
+        dev = self.device
+        with torch.no_grad():
+            images = torch.as_tensor(imgs, device=dev)[None]  # (1, C, 3, H, W)
+            intr = torch.as_tensor(rig.intrinsics, dtype=torch.float32, device=dev)[None]
+            c2e = torch.as_tensor(rig.cam_to_ego, dtype=torch.float32, device=dev)[None]
+            state, motion = None, None
+            if self.temporal and self._state is not None and self._prev_pose is not None:
+                m = np.linalg.inv(pose) @ self._prev_pose  # (4, 4) previous ego -> current ego
+                motion = torch.as_tensor(m, dtype=torch.float32, device=dev)[None]
+                state = self._state
+            out, new_state = self.detector(images, intr, c2e, state, motion)
+            scores = out.scores()[0]  # (Q,)
+            classes = out.classes()[0]  # (Q,)
+            points = self.detector.to_metres(out.points[-1][0])  # (Q, P, 2) ego metres
+            queries = out.queries[0]  # (Q, C)
+        if self.temporal:
+            self._state, self._prev_pose = new_state, pose
+        order = torch.argsort(scores, descending=True)
+        return Detections(
+            classes=classes[order].cpu().numpy().astype(np.int64),
+            scores=scores[order].cpu().numpy().astype(np.float32),
+            points=points[order].cpu().numpy().astype(np.float32),
+            queries=queries[order].cpu().numpy().astype(np.float32),
+        )
+
+
+@dataclass
+class MapperStats:
+    """Counters of one sequence (for logs and tests)."""
+
+    frames: int = 0
+    #: seconds spent per stage (STAGES)
+    seconds: dict[str, float] = field(default_factory=lambda: dict.fromkeys(STAGES, 0.0))
+    inserted: int = 0
+    merged: int = 0
+    reidentified: int = 0
+    merge_failures: int = 0
+    failures: list[str] = field(default_factory=list)
+
+
+class Mapper:
+    """The online mapper (see the module docstring). Implements ``MappingMethod``."""
+
+    def __init__(
+        self,
+        source: DetectionSource,
+        *,
+        association: AssociationHead | None = None,
+        fusion: FusionModule | None = None,
+        config: MapperConfig | None = None,
+        rng: PerceptionRange = RANGE_60x30,
+        device: str | torch.device = "cpu",
+        name: str = "icmapper",
+    ) -> None:
+        self.source = source
+        self.association = association.eval() if association is not None else None
+        self.fusion = fusion.eval() if fusion is not None else None
+        self.config = config or MapperConfig()
+        self.rng = rng
+        self.device = device
+        self.name = name
+        self.tracker = Tracker(self.config.assoc_threshold, self.config.max_age)
+        self._new_map()
+        self.stats = MapperStats()
+        self._untracked = UNTRACKED_ID_BASE
+
+    # ------------------------------------------------------------------ construction
+    @classmethod
+    def from_checkpoint(
+        cls,
+        path: str | Path,
+        config: MapperConfig | None = None,
+        device: str = "cpu",
+        variant: str = "full",
+    ) -> Mapper:
+        """The mapper with the networks of a training checkpoint.
+
+        variant: "full" (IC-Mapper), "no-fusion" (detector + association), "base" (detector,
+        positional association, no fusion: StreamMapNet-like + post tracking), "single-frame"
+        (like "base" without temporal memory: MapTR-like).
+        """
+        from icmapper.training.checkpoint import load_checkpoint
+        from icmapper.training.config import config_from_dict
+        from icmapper.training.objectives import ICMapperNet
+
+        blob = load_checkpoint(path, map_location=device)
+        tcfg = config_from_dict(blob["config"])
+        net = ICMapperNet(tcfg)
+        try:
+            net.load_state_dict(blob["model"])
+        except RuntimeError as exc:
+            raise ValueError(f"checkpoint {path} does not fit its config: {exc}") from None
+        variants = {
+            "full": (True, True, True),
+            "no-fusion": (True, True, False),
+            "base": (True, False, False),
+            "single-frame": (False, False, False),
+        }
+        if variant not in variants:
+            raise ValueError(f"unknown variant {variant!r}; expected one of {sorted(variants)}")
+        temporal, use_assoc, use_fusion = variants[variant]
+        cfg = config or MapperConfig(detect_threshold=tcfg.score_threshold)
+        cfg = replace(cfg, use_association=use_assoc, use_fusion=use_fusion)
+        name = "icmapper" if variant == "full" else f"icmapper-{variant}"
+        return cls(
+            NetworkDetector(net.detector, device, temporal=temporal),
+            association=net.association.to(device),
+            fusion=net.fusion.to(device),
+            config=cfg,
+            rng=tcfg.perception_range,
+            device=device,
+            name=name,
+        )
+
+    @classmethod
+    def with_oracle(
+        cls,
+        sequence: Sequence,
+        noise: Any = "low",
+        seed: int = 0,
+        config: MapperConfig | None = None,
+        rng: PerceptionRange = RANGE_60x30,
+    ) -> Mapper:
+        """The mapper fed by the noisy-GT oracle (positional association, no fusion)."""
+        from icmapper.mapping.oracle import OracleDetector
+
+        return cls(
+            OracleDetector(sequence, rng=rng, noise=noise, seed=seed), config=config, rng=rng
+        )
+
+    # ------------------------------------------------------------------ state
+    def _new_map(self) -> None:
+        from icmapper._icmap import GlobalMap
+
+        self._map = GlobalMap(smoothing=self.config.smoothing, spacing=self.config.spacing)
+
+    @property
+    def global_map(self) -> GlobalMap:
+        return self._map
+
+    def reset(self) -> None:
+        """A new sequence: empty map, empty buffer, detector memory cleared."""
+        self.source.reset()
+        self.tracker.reset()
+        self._new_map()
+        self.stats = MapperStats()
+        self._untracked = UNTRACKED_ID_BASE
+
+    def resume(self, map_file: str | Path) -> None:
+        """Continues an existing map (saved with ``global_map.save``): new ids start above it."""
+        from icmapper._icmap import GlobalMap
+
+        gmap = GlobalMap.load(str(map_file))
+        self.source.reset()
+        self.tracker.reset()
+        self._map = gmap
+        ids = gmap.ids()
+        self.tracker.reserve_ids(int(ids.max()) + 1 if len(ids) else 0)
+
+    def finish(self) -> GlobalMap:
+        return self._map
+
+    # ------------------------------------------------------------------ one frame
+    def step(self, frame: Frame) -> StepResult:
+        """Processes one keyframe. Bad input (NaN points, bad pose) raises ValueError before any
+        state changes."""
+        cfg = self.config
+        pose = np.asarray(frame.pose, dtype=np.float64)
+        xyyaw = pose_to_xy_yaw(pose)  # validates the pose
+        sec = self.stats.seconds
+        t0 = time.perf_counter()
+        dets = self.source.detect(frame)
+        dets.validate()
+        dets = _select(dets, dets.scores >= cfg.detect_threshold)
+        tracked = dets.scores >= cfg.track_threshold  # (k,)
+        det = _select(dets, tracked)
+        t1 = time.perf_counter()
+        sec["detector"] += t1 - t0
+
+        track_ids = self._associate(det, pose)  # times "association" and "tracking"
+        t2 = time.perf_counter()
+        hist_ids, _, hist_pts, _ = self._map.sample_patch(
+            xyyaw,
+            (self.rng.half_x, self.rng.half_y),
+            margin=cfg.fusion_margin,
+            n_points=cfg.history_points,
+        )
+        hist_row = {int(i): j for j, i in enumerate(hist_ids.tolist())}
+        t2b = time.perf_counter()
+        sec["sampling"] += t2b - t2
+        track_ids = self._reidentify(det, track_ids, hist_row, hist_pts)
+        t3 = time.perf_counter()
+        sec["tracking"] += t3 - t2b
+        fused = self._fuse(det, track_ids, hist_row, hist_pts)  # (m, P, 2) ego
+        t4 = time.perf_counter()
+        sec["fusion"] += t4 - t3
+
+        inserted, merged = self._merge(det, track_ids, fused, pose, frame.index)
+        sec["merge"] += time.perf_counter() - t4
+
+        all_ids = np.empty(len(dets), np.int64)
+        all_ids[tracked] = track_ids
+        n_untracked = int((~tracked).sum())
+        all_ids[~tracked] = np.arange(self._untracked, self._untracked + n_untracked)
+        self._untracked += n_untracked
+        points = dets.points.copy()
+        points[tracked] = fused
+        self.stats.frames += 1
+        return StepResult(frame.index, dets, all_ids, points, inserted, merged)
+
+    def _associate(self, det: Detections, pose: NDArray[np.float64]) -> NDArray[np.int64]:
+        t0 = time.perf_counter()
+        trk_ids, trk_cls, trk_pts, trk_q = self.tracker.tracks_in_ego(pose)
+        k, t = len(det), len(trk_ids)
+        if k == 0 or t == 0:
+            scores = np.zeros((k, t), np.float64)
+        elif (
+            self.config.use_association
+            and self.association is not None
+            and det.queries is not None
+            and trk_q is not None
+        ):
+            import torch
+
+            unit = self.source.detector.to_unit  # type: ignore[attr-defined]
+            dev = self.device
+            with torch.no_grad():
+                s = self.association.scores(
+                    torch.as_tensor(det.queries, device=dev),
+                    unit(torch.as_tensor(det.points, device=dev)),
+                    torch.as_tensor(trk_q, device=dev),
+                    unit(torch.as_tensor(trk_pts, device=dev)),
+                )  # (k, t)
+            scores = s.cpu().numpy().astype(np.float64)
+        else:
+            scores = positional_affinity(
+                det.points,
+                det.classes,
+                trk_pts,
+                trk_cls,
+                scale=self.config.positional_scale,
+                reduce="min",  # instances grow and shrink at the range edge
+            )
+        t1 = time.perf_counter()
+        ids = self.tracker.assign(scores, det.classes, det.points, pose, det.queries)
+        self.stats.seconds["association"] += t1 - t0
+        self.stats.seconds["tracking"] += time.perf_counter() - t1
+        return ids
+
+    def _reidentify(
+        self,
+        det: Detections,
+        track_ids: NDArray[np.int64],
+        hist_row: dict[int, int],
+        hist_pts: NDArray[np.float32],
+    ) -> NDArray[np.int64]:
+        """New tracks lying on a same-class global instance take its id (see module docstring)."""
+        limit = self.config.reid_distance
+        if limit <= 0 or not hist_row:
+            return track_ids
+        ids = track_ids.copy()
+        taken = {int(i) for i in ids if int(i) in hist_row}
+        for j, tid in enumerate(ids.tolist()):
+            if tid in self._map or tid in hist_row:
+                continue  # an existing instance: nothing to re-identify
+            cls = int(det.classes[j])
+            cands = [
+                (gid, row)
+                for gid, row in hist_row.items()
+                if gid not in taken and self._map.get(gid)[0] == cls
+            ]
+            if not cands:
+                continue
+            segs = _segments(
+                hist_pts[[r for _, r in cands]].astype(np.float64), np.full(len(cands), cls == 0)
+            )  # (c, S, 2, 2)
+            p = det.points[j][None].astype(np.float64)  # (1, P, 2)
+            d_to_hist = _mean_point_to_segments(p, segs)[0]  # (c,)
+            d_from_hist = _mean_point_to_segments(
+                hist_pts[[r for _, r in cands]].astype(np.float64),
+                _segments(p, np.array([cls == 0])),
+            )[:, 0]  # (c,)
+            d = np.minimum(d_to_hist, d_from_hist)  # one covers part of the other
+            best = int(np.argmin(d))
+            if d[best] <= limit:
+                gid = cands[best][0]
+                self.tracker.rename(tid, gid)
+                ids[j] = gid
+                taken.add(gid)
+                self.stats.reidentified += 1
+        return ids
+
+    def _fuse(
+        self,
+        det: Detections,
+        track_ids: NDArray[np.int64],
+        hist_row: dict[int, int],
+        hist_pts: NDArray[np.float32],
+    ) -> NDArray[np.float32]:
+        if not (self.config.use_fusion and self.fusion is not None) or len(det) == 0:
+            return det.points.copy()
+        has = np.array([int(i) in hist_row for i in track_ids], bool)  # (m,)
+        if not has.any():
+            return det.points.copy()
+        import torch
+
+        s = self.config.history_points
+        hist = np.zeros((len(det), s, 2), np.float32)  # (m, S, 2)
+        hist[has] = hist_pts[[hist_row[int(i)] for i in track_ids[has]]]
+        dev = self.device
+        with torch.no_grad():
+            out = self.fusion(
+                torch.as_tensor(det.points, device=dev),
+                torch.as_tensor(det.classes, device=dev),
+                torch.as_tensor(hist, device=dev),
+                torch.as_tensor(has, device=dev),
+            )[-1]  # (m, P, 2) metres
+        return out.cpu().numpy().astype(np.float32)
+
+    def _merge(
+        self,
+        det: Detections,
+        track_ids: NDArray[np.int64],
+        fused: NDArray[np.float32],
+        pose: NDArray[np.float64],
+        frame_index: int,
+    ) -> tuple[list[int], list[int]]:
+        inserted: list[int] = []
+        merged: list[int] = []
+        for j, tid in enumerate(track_ids.tolist()):
+            world = ego_to_world(fused[j], pose)  # (P, 2)
+            try:
+                if tid in self._map:
+                    self._map.merge(tid, world, frame=frame_index)
+                    merged.append(tid)
+                elif self.tracker.track(tid).hits < self.config.min_hits:
+                    pass  # tentative track: not in the map until confirmed
+                else:
+                    self._map.insert_with_id(tid, int(det.classes[j]), world, frame=frame_index)
+                    inserted.append(tid)
+            except ValueError as exc:  # degenerate geometry (e.g. a collapsed detection)
+                self.stats.merge_failures += 1
+                if len(self.stats.failures) < 20:
+                    self.stats.failures.append(f"frame {frame_index}, id {tid}: {exc}")
+                continue
+            self.tracker.set_points(tid, world)
+        self.stats.inserted += len(inserted)
+        self.stats.merged += len(merged)
+        return inserted, merged
+
+
+def _select(d: Detections, keep: NDArray[np.bool_]) -> Detections:
+    return Detections(
+        classes=d.classes[keep],
+        scores=d.scores[keep],
+        points=d.points[keep],
+        queries=None if d.queries is None else d.queries[keep],
+        gt_ids=None if d.gt_ids is None else d.gt_ids[keep],
+    )

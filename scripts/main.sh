@@ -1,0 +1,20 @@
+#!/usr/bin/env bash
+# The main job: sets everything up, then runs IC-Mapper (shipped checkpoint) and every baseline on
+# synthetic validation cities (and on the Argoverse 2 logs in ../shared/data/av2-mini when present),
+# prints the paper-style comparison tables and writes run folders, global maps and pictures to
+# out/main/. Usage: bash scripts/main.sh [extra `icmapper compare` args]
+set -euo pipefail
+cd "$(dirname "$0")/.."
+bash scripts/setup.sh
+export OMP_NUM_THREADS=${OMP_NUM_THREADS:-2}
+OUT=${ICMAPPER_OUT:-out/main}
+sources=(--source "sim:val:${ICMAPPER_SIM_SEQS:-4}")
+AV2=../shared/data/av2-mini
+if [ -d "$AV2" ]; then
+    sources+=(--source "av2:$AV2")
+else
+    echo "note: $AV2 not found; running on synthetic cities only" >&2
+fi
+rm -rf "$OUT"
+.venv/bin/icmapper compare "${sources[@]}" --out "$OUT" "$@"
+echo "pictures: $OUT/*/*/*.png   report: $OUT/report.md"
