@@ -118,6 +118,10 @@ def preview_png(
     ax.set_xlim(-rng.half_y, rng.half_y)
     ax.set_ylim(-rng.half_x, rng.half_x)
     ax.set_aspect("equal")
+    ax.set_xlabel("ego y (m), left is left", fontsize=6)
+    ax.set_ylabel("ego x (m), forward", fontsize=6)
+    ticks = np.linspace(-rng.half_y, rng.half_y, 5)
+    ax.set_xticks(ticks, [f"{-t:g}" for t in ticks])  # plotted at -y: label with y
     ax.set_title(f"{sequence.name} frame {frame.index}  BEV GT {rng.name} m", fontsize=8)
     ax.tick_params(labelsize=6)
     handles = [
