@@ -18,31 +18,102 @@ use nalgebra::Vector2;
 /// Consecutive points closer than this (metres) are merged before merging.
 const DEDUP_EPS: f64 = 1e-9;
 
-/// Projection of `p` onto the polyline `g` (cumulative lengths `cum`): the arc length of the
-/// nearest point, extended linearly beyond the ends along the end segments (negative before the
-/// start, beyond the length after the end), and the unit tangent there.
-fn project(g: &[Point], cum: &[f64], p: &Point) -> (f64, Vector2<f64>) {
-    let nseg = g.len() - 1;
-    let mut best = (f64::INFINITY, 0.0, Vector2::new(1.0, 0.0));
-    for i in 0..nseg {
+/// Projection of points onto the polyline `g` (cumulative lengths `cum`, total length > 0): the
+/// arc length of the nearest point, extended linearly beyond the ends along the end segments
+/// (negative before the start, beyond the length after the end), and the unit tangent there.
+///
+/// The nearest segment is the first one (lowest index) of minimal squared distance, exactly as a
+/// brute-force scan over all segments finds it; segments that cannot be nearer than the best one
+/// so far are skipped by a triangle-inequality bound (a point of segment `j >= i` lies within
+/// `cum[j + 1] - cum[i]` of vertex `i`), starting from the previous query's segment, so that
+/// queries along the polyline cost about O(log m) segment tests instead of O(m).
+struct Projector<'a> {
+    g: &'a [Point],
+    cum: &'a [f64],
+    /// Segment of the previous query (the first candidate of the next one).
+    hint: usize,
+    /// Absolute slack (metres) making the skip bound safe against rounding.
+    slack: f64,
+}
+
+impl<'a> Projector<'a> {
+    fn new(g: &'a [Point], cum: &'a [f64]) -> Self {
+        let scale = g
+            .iter()
+            .map(|q| q.x.abs().max(q.y.abs()))
+            .fold(cum[cum.len() - 1], f64::max);
+        Projector {
+            g,
+            cum,
+            hint: 0,
+            slack: 1e-9 * (1.0 + scale),
+        }
+    }
+
+    /// Squared distance from `p` to segment `i`, with the (extended) arc length and unit tangent
+    /// of the nearest point; `None` for a zero-length segment.
+    #[inline]
+    fn segment(&self, i: usize, p: &Point) -> Option<(f64, f64, Vector2<f64>)> {
+        let (g, cum) = (self.g, self.cum);
+        let nseg = g.len() - 1;
         let d = g[i + 1] - g[i];
         let len = cum[i + 1] - cum[i];
         if len <= 0.0 {
-            continue;
+            return None;
         }
         let t_raw = (p - g[i]).dot(&d) / (len * len);
         let t = t_raw.clamp(0.0, 1.0);
         let dist2 = (p - (g[i] + d * t)).norm_squared();
-        if dist2 < best.0 {
-            let t_ext = if (i == 0 && t_raw < 0.0) || (i == nseg - 1 && t_raw > 1.0) {
-                t_raw
-            } else {
-                t
-            };
-            best = (dist2, cum[i] + t_ext * len, d / len);
-        }
+        let t_ext = if (i == 0 && t_raw < 0.0) || (i == nseg - 1 && t_raw > 1.0) {
+            t_raw
+        } else {
+            t
+        };
+        Some((dist2, cum[i] + t_ext * len, d / len))
     }
-    (best.1, best.2)
+
+    fn project(&mut self, p: &Point) -> (f64, Vector2<f64>) {
+        let (g, cum) = (self.g, self.cum);
+        let nseg = g.len() - 1;
+        let mut best = (f64::INFINITY, 0.0, Vector2::new(1.0, 0.0));
+        let mut best_i = usize::MAX;
+        if let Some(c) = self.segment(self.hint.min(nseg - 1), p) {
+            best = c;
+            best_i = self.hint.min(nseg - 1);
+        }
+        let mut i = 0;
+        while i < nseg {
+            if best_i != usize::MAX {
+                // Segments j >= i with cum[j + 1] - cum[i] < reach are farther than the best.
+                let r = (p - g[i]).norm();
+                let reach = r - best.0.sqrt() - self.slack;
+                if reach > 0.0 {
+                    let target = cum[i] + reach;
+                    let mut j = i;
+                    while j < nseg && cum[j + 1] < target {
+                        j += 1;
+                    }
+                    if j > i {
+                        i = j;
+                        continue;
+                    }
+                }
+            }
+            if i != best_i {
+                if let Some(c) = self.segment(i, p) {
+                    if c.0 < best.0 || (c.0 == best.0 && i < best_i) {
+                        best = c;
+                        best_i = i;
+                    }
+                }
+            }
+            i += 1;
+        }
+        if best_i != usize::MAX {
+            self.hint = best_i;
+        }
+        (best.1, best.2)
+    }
 }
 
 /// Merges a detected polyline into a global polyline (both world frame): decides the orientation of
@@ -88,12 +159,13 @@ pub fn merge_polyline(
     if gcum[gcum.len() - 1] <= DEDUP_EPS {
         return fit_curve(&d, s, spacing);
     }
-    let proj: Vec<(f64, Vector2<f64>)> = d.iter().map(|p| project(&g, &gcum, p)).collect();
+    let mut projector = Projector::new(&g, &gcum);
+    let proj: Vec<(f64, Vector2<f64>)> = d.iter().map(|p| projector.project(p)).collect();
     // Orientation of the detection relative to the global polyline.
     let mut score = 0.0;
     for j in 0..d.len() - 1 {
         let mid = d[j] + (d[j + 1] - d[j]) * 0.5;
-        let (_, tangent) = project(&g, &gcum, &mid);
+        let (_, tangent) = projector.project(&mid);
         score += (d[j + 1] - d[j]).dot(&tangent);
     }
     let (s_first, s_last) = (proj[0].0, proj[proj.len() - 1].0);
@@ -358,7 +430,52 @@ mod tests {
         assert_eq!(h, vec![p(0.0, 0.0), p(2.0, 0.0), p(2.0, 2.0), p(0.0, 2.0)]);
     }
 
+    /// The brute-force projection (every segment, first strict minimum) that [`Projector`]
+    /// must reproduce exactly.
+    fn project_brute(g: &[Point], cum: &[f64], p: &Point) -> (f64, Vector2<f64>) {
+        let nseg = g.len() - 1;
+        let mut best = (f64::INFINITY, 0.0, Vector2::new(1.0, 0.0));
+        for i in 0..nseg {
+            let d = g[i + 1] - g[i];
+            let len = cum[i + 1] - cum[i];
+            if len <= 0.0 {
+                continue;
+            }
+            let t_raw = (p - g[i]).dot(&d) / (len * len);
+            let t = t_raw.clamp(0.0, 1.0);
+            let dist2 = (p - (g[i] + d * t)).norm_squared();
+            if dist2 < best.0 {
+                let t_ext = if (i == 0 && t_raw < 0.0) || (i == nseg - 1 && t_raw > 1.0) {
+                    t_raw
+                } else {
+                    t
+                };
+                best = (dist2, cum[i] + t_ext * len, d / len);
+            }
+        }
+        (best.1, best.2)
+    }
+
     proptest! {
+        #[test]
+        fn prop_projector_matches_brute_force(
+            g in prop::collection::vec((-30.0f64..30.0, -30.0f64..30.0), 2..40),
+            q in prop::collection::vec((-40.0f64..40.0, -40.0f64..40.0), 1..30),
+            grid in any::<bool>(),
+        ) {
+            // Optionally snap to a coarse grid to provoke exact ties and repeated points.
+            let snap = |v: f64| if grid { (v / 5.0).round() * 5.0 } else { v };
+            let g: Vec<Point> = g.iter().map(|&(x, y)| p(snap(x), snap(y))).collect();
+            let g = dedup(&g, DEDUP_EPS, false);
+            prop_assume!(g.len() >= 2);
+            let cum = cumulative_lengths(&g);
+            let mut pr = Projector::new(&g, &cum);
+            for &(x, y) in &q {
+                let pt = p(snap(x), snap(y));
+                prop_assert_eq!(pr.project(&pt), project_brute(&g, &cum, &pt));
+            }
+        }
+
         #[test]
         fn prop_merge_spans_both(x0 in -20.0f64..20.0, len in 2.0f64..30.0, y in -0.3f64..0.3, rev in any::<bool>()) {
             let g = line(0.0, 20.0, 0.0);
@@ -394,6 +511,9 @@ mod degenerate_tests {
     fn detection_with_one_distinct_point_is_rejected() {
         let g = [Point::new(0.0, 0.0), Point::new(10.0, 0.0)];
         let d = [Point::new(3.0, 3.0), Point::new(3.0, 3.0)];
-        assert!(matches!(merge_polyline(&g, &d, 0.5, 1.0), Err(GeomError::Degenerate { .. })));
+        assert!(matches!(
+            merge_polyline(&g, &d, 0.5, 1.0),
+            Err(GeomError::Degenerate { .. })
+        ));
     }
 }
