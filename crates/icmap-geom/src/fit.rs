@@ -52,6 +52,37 @@ impl SplineCurve {
         let u = u.clamp(t[k], t[nk1]);
         // Knot interval t[l] <= u < t[l + 1] with k <= l <= nk1 - 1 (binary search).
         let l = k + t[k + 1..nk1].partition_point(|&x| x <= u);
+        self.eval_in(u, l)
+    }
+
+    /// The curve at each of the parameters `us`, best non-decreasing (same values as
+    /// [`Self::eval`], the knot interval found by a walk from the previous one instead of a binary
+    /// search).
+    fn eval_sorted(&self, us: &[f64]) -> Vec<Point> {
+        let k = self.degree;
+        let t = &self.knots;
+        let nk1 = t.len() - k - 1;
+        let mut l = k;
+        us.iter()
+            .map(|&u| {
+                let u = u.clamp(t[k], t[nk1]);
+                // As in `eval`: the largest l <= nk1 - 1 with t[l] <= u (t[k] <= u always);
+                // walks back too, so unsorted input still gives the same values.
+                while l > k && t[l] > u {
+                    l -= 1;
+                }
+                while l + 1 < nk1 && t[l + 1] <= u {
+                    l += 1;
+                }
+                self.eval_in(u, l)
+            })
+            .collect()
+    }
+
+    /// The curve at `u` in knot interval `l`.
+    fn eval_in(&self, u: f64, l: usize) -> Point {
+        let k = self.degree;
+        let t = &self.knots;
         let h = bspline_basis(t, k, u, l);
         let mut out = [0.0; 2];
         for (d, o) in out.iter_mut().enumerate() {
@@ -530,10 +561,14 @@ fn smooth_on_knots(
     let mut p = nk1 as f64 / diag;
     let (mut ich1, mut ich3) = (false, false);
     let mut best = (fit.c.clone(), fit.fp);
+    // Work copies of the triangularised system, reset from `fit` on every iteration.
+    let mut g = fit.r.clone();
+    let mut c = fit.z.clone();
     for iter in 1..=MAXIT {
         let pinv = 1.0 / p;
-        let mut g = fit.r.clone();
-        let mut c = fit.z.clone();
+        g.copy_from_slice(&fit.r);
+        c[0].copy_from_slice(&fit.z[0]);
+        c[1].copy_from_slice(&fit.z[1]);
         for (it, brow) in b.iter().enumerate() {
             let mut h = [0.0; 6];
             for j in 0..k2 {
@@ -556,12 +591,12 @@ fn smooth_on_knots(
                 h[i2] = 0.0;
             }
         }
-        let c = [
+        let coef = [
             back_substitute(&g, &c[0], k2),
             back_substitute(&g, &c[1], k2),
         ];
-        let fp: f64 = (0..m).map(|it| residual2(&c, k, des, x, it)).sum();
-        best = (c, fp);
+        let fp: f64 = (0..m).map(|it| residual2(&coef, k, des, x, it)).sum();
+        best = (coef, fp);
         let fpms = fp - s;
         if fpms.abs() < acc || iter == MAXIT {
             break;
@@ -808,7 +843,7 @@ pub fn fit_curve(points: &[Point], s: f64, spacing: f64) -> Result<Vec<Point>> {
     }
     let curve = fit_spline(points, s)?;
     let us = arc_length_params(&curve, spacing)?;
-    Ok(us.into_iter().map(|u| curve.eval(u)).collect())
+    Ok(curve.eval_sorted(&us))
 }
 
 /// The parameters `u_i` of the `max(2, ceil(L / spacing) + 1)` points evenly spaced by arc length
