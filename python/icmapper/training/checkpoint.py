@@ -64,3 +64,25 @@ def load_checkpoint(path: str | Path, map_location: str | torch.device = "cpu") 
     if blob.get("version") != VERSION:
         raise ValueError(f"checkpoint {path} has version {blob.get('version')}, expected {VERSION}")
     return blob
+
+
+def export_checkpoint(src: str | Path, dst: str | Path) -> None:
+    """Writes an inference checkpoint: ``src`` without optimizer and RNG state (smaller; what the
+    Mapper needs), atomically. Usage: ``python -m icmapper.training.checkpoint SRC DST``."""
+    blob = load_checkpoint(src)
+    save_checkpoint(
+        dst,
+        model=blob["model"],
+        optimizer=None,
+        stage=blob["stage"],
+        step=blob["step"],
+        config=blob["config"],
+    )
+
+
+if __name__ == "__main__":  # pragma: no cover
+    import sys
+
+    if len(sys.argv) != 3:
+        sys.exit("usage: python -m icmapper.training.checkpoint SRC DST")
+    export_checkpoint(sys.argv[1], sys.argv[2])
