@@ -266,13 +266,6 @@ def test_global_id_survives_long_occlusion_by_reidentification(
     assert before != after
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="known mapper weakness (issue 6 report): curb 112000 of sim-10059-0 dropped for 2 "
-    "frames (frames 8-9) comes back with a new id: the piece slides along the curb by the ego's "
-    "motion, so neither the old piece nor the map instance covers the new one (min directed "
-    "Chamfer above the affinity gate and above reid_distance), and the map gains a duplicate",
-)
 def test_track_id_survives_short_occlusion_sliding_curb(
     sim_val2: list[Sequence], sim_gt: list[list[FrameGT]]
 ) -> None:

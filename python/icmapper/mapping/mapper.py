@@ -11,8 +11,8 @@ Per frame (paper Fig. 2):
    ``H`` (or positional affinity without query features), threshold θ, one-to-one assignment
    maximising the summed score; unmatched detections get new ids;
 3. re-identification against the map (an extension, documented in docs/mapping.md): a new track
-   whose points lie within ``reid_distance`` of a same-class global instance takes that instance's
-   id, so a track lost for longer than ``max_age`` does not duplicate the map;
+   at least half of whose points lie within ``reid_distance`` of a same-class global instance takes
+   that instance's id, so a lost track does not duplicate the map;
 4. the global map is sampled in the patch expanded by ``fusion_margin`` (Rust ``sample_patch``);
 5. fusion of every tracked detection with the history of its id;
 6. merge into the global map (curve fit for polylines, union for crossings), or insert once the
@@ -38,12 +38,7 @@ from icmapper.data.types import (
     ego_to_world,
     pose_to_xy_yaw,
 )
-from icmapper.mapping.tracker import (
-    Tracker,
-    _mean_point_to_segments,
-    _segments,
-    positional_affinity,
-)
+from icmapper.mapping.tracker import Tracker, _segments, positional_affinity
 from icmapper.mapping.types import Detections, DetectionSource, StepResult
 
 if TYPE_CHECKING:
@@ -53,6 +48,10 @@ if TYPE_CHECKING:
     from icmapper.models.association import AssociationHead
     from icmapper.models.detector import MapDetector
     from icmapper.models.fusion import FusionModule
+
+#: Share of a new track's points that must lie within ``reid_distance`` of a global instance for
+#: the track to take that instance's id.
+REID_MIN_OVERLAP = 0.5
 
 #: The stages of one step, in order (timed in ``MapperStats.seconds``).
 STAGES = ("detector", "association", "tracking", "sampling", "fusion", "merge")
@@ -405,17 +404,14 @@ class Mapper:
             ]
             if not cands:
                 continue
-            segs = _segments(
-                hist_pts[[r for _, r in cands]].astype(np.float64), np.full(len(cands), cls == 0)
-            )  # (c, S, 2, 2)
-            p = det.points[j][None].astype(np.float64)  # (1, P, 2)
-            d_to_hist = _mean_point_to_segments(p, segs)[0]  # (c,)
-            d_from_hist = _mean_point_to_segments(
-                hist_pts[[r for _, r in cands]].astype(np.float64),
-                _segments(p, np.array([cls == 0])),
-            )[:, 0]  # (c,)
-            d = np.minimum(d_to_hist, d_from_hist)  # one covers part of the other
-            best = int(np.argmin(d))
+            hist = hist_pts[[r for _, r in cands]].astype(np.float64)  # (c, S, 2)
+            segs = _segments(hist, np.full(len(cands), cls == 0))  # (c, S, 2, 2)
+            dist = _point_to_segments(det.points[j].astype(np.float64), segs)  # (c, P)
+            # share of the detection lying on the instance: a piece that slid along the
+            # instance or grew at the range edge still overlaps it over most of its length
+            overlap = (dist <= limit).mean(axis=1)  # (c,)
+            best = int(np.argmax(overlap - 1e-3 * dist.mean(axis=1)))
+            d = np.where(overlap >= REID_MIN_OVERLAP, 0.0, np.inf)  # (c,)
             if d[best] <= limit:
                 gid = cands[best][0]
                 self.tracker.rename(tid, gid)
@@ -481,6 +477,16 @@ class Mapper:
         self.stats.inserted += len(inserted)
         self.stats.merged += len(merged)
         return inserted, merged
+
+
+def _point_to_segments(p: NDArray[np.float64], seg: NDArray[np.float64]) -> NDArray[np.float64]:
+    """p (n, 2), seg (c, S, 2, 2) -> (c, n): distance of every point to the nearest segment."""
+    a, b = seg[:, None, :, 0], seg[:, None, :, 1]  # (c, 1, S, 2)
+    ab = b - a  # (c, 1, S, 2)
+    ap = p[None, :, None, :] - a  # (c, n, S, 2)
+    t = np.clip((ap * ab).sum(-1) / np.maximum((ab * ab).sum(-1), 1e-18), 0.0, 1.0)  # (c, n, S)
+    off = ap - t[..., None] * ab  # (c, n, S, 2)
+    return np.sqrt((off * off).sum(-1)).min(axis=2)  # (c, n)
 
 
 def _select(d: Detections, keep: NDArray[np.bool_]) -> Detections:
