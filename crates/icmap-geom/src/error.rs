@@ -10,7 +10,11 @@ pub enum GeomError {
     NonFinite { what: String },
     /// Geometry with fewer points than the operation needs (empty, one point, ...).
     #[error("{what} has {got} point(s); at least {min} are required")]
-    TooFewPoints { what: String, got: usize, min: usize },
+    TooFewPoints {
+        what: String,
+        got: usize,
+        min: usize,
+    },
     /// Geometry that has enough points but no extent (all points identical, zero area ...).
     #[error("{what} is degenerate: {reason}")]
     Degenerate { what: String, reason: String },

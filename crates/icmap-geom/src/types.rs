@@ -67,7 +67,9 @@ impl Pose2 {
     /// A pose; errors if any component is not finite.
     pub fn new(x: f64, y: f64, yaw: f64) -> Result<Self> {
         if !(x.is_finite() && y.is_finite() && yaw.is_finite()) {
-            return Err(GeomError::NonFinite { what: "pose".into() });
+            return Err(GeomError::NonFinite {
+                what: "pose".into(),
+            });
         }
         Ok(Pose2 { x, y, yaw })
     }
@@ -100,18 +102,29 @@ impl Patch {
     /// The patch of `pose` with half extents `(hx + margin, hy + margin)`. Errors on non-finite
     /// values or on negative resulting extents (a negative `hx`, `hy` or `margin` is rejected).
     pub fn new(pose: Pose2, hx: f64, hy: f64, margin: f64) -> Result<Self> {
-        for (name, v) in [("half_extents", hx), ("half_extents", hy), ("margin", margin)] {
+        for (name, v) in [
+            ("half_extents", hx),
+            ("half_extents", hy),
+            ("margin", margin),
+        ] {
             if !v.is_finite() {
                 return Err(GeomError::NonFinite { what: name.into() });
             }
             if v < 0.0 {
                 return Err(GeomError::InvalidParameter {
-                    name: if name == "margin" { "margin" } else { "half_extents" },
+                    name: if name == "margin" {
+                        "margin"
+                    } else {
+                        "half_extents"
+                    },
                     reason: format!("must be >= 0, got {v}"),
                 });
             }
         }
-        Ok(Patch { pose, half_extents: Vector2::new(hx + margin, hy + margin) })
+        Ok(Patch {
+            pose,
+            half_extents: Vector2::new(hx + margin, hy + margin),
+        })
     }
 
     /// Whether a world point lies inside the patch (boundary included).
@@ -123,7 +136,8 @@ impl Patch {
     /// The four corners in the world frame, counter-clockwise.
     pub fn corners(&self) -> [Point; 4] {
         let (hx, hy) = (self.half_extents.x, self.half_extents.y);
-        [(-hx, -hy), (hx, -hy), (hx, hy), (-hx, hy)].map(|(x, y)| self.pose.to_world(&Point::new(x, y)))
+        [(-hx, -hy), (hx, -hy), (hx, hy), (-hx, hy)]
+            .map(|(x, y)| self.pose.to_world(&Point::new(x, y)))
     }
 
     /// The world-axis-aligned bounding box of the patch.
@@ -143,7 +157,11 @@ impl Patch {
 /// geometry in the error message.
 pub fn validate_points(points: &[Point], min: usize, what: &str) -> Result<()> {
     if points.len() < min {
-        return Err(GeomError::TooFewPoints { what: what.into(), got: points.len(), min });
+        return Err(GeomError::TooFewPoints {
+            what: what.into(),
+            got: points.len(),
+            min,
+        });
     }
     if points.iter().any(|p| !(p.x.is_finite() && p.y.is_finite())) {
         return Err(GeomError::NonFinite { what: what.into() });
