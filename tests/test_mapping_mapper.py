@@ -188,15 +188,6 @@ def test_no_duplicates_exact_oracle_first_drive(
     assert duplicates(m) == []
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="known mapper weakness (issue 6 report): on sim-10042-1 with exact detections the map "
-    "holds two duplicate boundary pairs: (7, 13) - the curb 122000 leaves the range for 3 frames "
-    "(> max_age) and returns overlapping only ~3 m of the mapped part, so the containment test of "
-    "re-identification (mean distance <= 1 m) fails; (20, 26) - the curb 120 is clipped into two "
-    "pieces at frame 49, the first piece takes global id 20 and re-identification is one-to-one "
-    "per frame, so the second piece (0.42 m from instance 20) cannot join it",
-)
 def test_no_duplicates_exact_oracle_second_drive(
     sim_val2: list[Sequence], sim_gt: list[list[FrameGT]]
 ) -> None:

@@ -166,7 +166,8 @@ class MapperStats:
     seconds: dict[str, float] = field(default_factory=lambda: dict.fromkeys(STAGES, 0.0))
     inserted: int = 0
     merged: int = 0
-    reidentified: int = 0
+    reidentified: int = 0  # new tracks renamed to a global instance's id
+    aliased: int = 0  # new tracks mapped into an instance already matched this frame
     merge_failures: int = 0
     failures: list[str] = field(default_factory=list)
 
@@ -196,6 +197,7 @@ class Mapper:
         self._new_map()
         self.stats = MapperStats()
         self._untracked = UNTRACKED_ID_BASE
+        self._alias: dict[int, int] = {}  # track id -> global instance id it maps into
 
     # ------------------------------------------------------------------ construction
     @classmethod
@@ -278,6 +280,7 @@ class Mapper:
         self._new_map()
         self.stats = MapperStats()
         self._untracked = UNTRACKED_ID_BASE
+        self._alias: dict[int, int] = {}  # track id -> global instance id it maps into
 
     def resume(self, map_file: str | Path) -> None:
         """Continues an existing map (saved with ``global_map.save``): new ids start above it."""
@@ -286,6 +289,7 @@ class Mapper:
         gmap = GlobalMap.load(str(map_file))
         self.source.reset()
         self.tracker.reset()
+        self._alias = {}
         self._map = gmap
         ids = gmap.ids()
         self.tracker.reserve_ids(int(ids.max()) + 1 if len(ids) else 0)
@@ -394,14 +398,10 @@ class Mapper:
         ids = track_ids.copy()
         taken = {int(i) for i in ids if int(i) in hist_row}
         for j, tid in enumerate(ids.tolist()):
-            if tid in self._map or tid in hist_row:
+            if tid in self._map or tid in hist_row or tid in self._alias:
                 continue  # an existing instance: nothing to re-identify
             cls = int(det.classes[j])
-            cands = [
-                (gid, row)
-                for gid, row in hist_row.items()
-                if gid not in taken and self._map.get(gid)[0] == cls
-            ]
+            cands = [(gid, row) for gid, row in hist_row.items() if self._map.get(gid)[0] == cls]
             if not cands:
                 continue
             hist = hist_pts[[r for _, r in cands]].astype(np.float64)  # (c, S, 2)
@@ -414,10 +414,16 @@ class Mapper:
             d = np.where(overlap >= REID_MIN_OVERLAP, 0.0, np.inf)  # (c,)
             if d[best] <= limit:
                 gid = cands[best][0]
-                self.tracker.rename(tid, gid)
-                ids[j] = gid
-                taken.add(gid)
-                self.stats.reidentified += 1
+                if gid in taken:
+                    # another piece of the same instance (clipped into several pieces): the
+                    # track keeps its id and maps into the instance
+                    self._alias[tid] = gid
+                    self.stats.aliased += 1
+                else:
+                    self.tracker.rename(tid, gid)
+                    ids[j] = gid
+                    taken.add(gid)
+                    self.stats.reidentified += 1
         return ids
 
     def _fuse(
@@ -429,14 +435,15 @@ class Mapper:
     ) -> NDArray[np.float32]:
         if not (self.config.use_fusion and self.fusion is not None) or len(det) == 0:
             return det.points.copy()
-        has = np.array([int(i) in hist_row for i in track_ids], bool)  # (m,)
+        targets = [self._alias.get(int(i), int(i)) for i in track_ids]
+        has = np.array([t in hist_row for t in targets], bool)  # (m,)
         if not has.any():
             return det.points.copy()
         import torch
 
         s = self.config.history_points
         hist = np.zeros((len(det), s, 2), np.float32)  # (m, S, 2)
-        hist[has] = hist_pts[[hist_row[int(i)] for i in track_ids[has]]]
+        hist[has] = hist_pts[[hist_row[t] for t, h in zip(targets, has, strict=True) if h]]
         dev = self.device
         with torch.no_grad():
             out = self.fusion(
@@ -459,10 +466,11 @@ class Mapper:
         merged: list[int] = []
         for j, tid in enumerate(track_ids.tolist()):
             world = ego_to_world(fused[j], pose)  # (P, 2)
+            target = self._alias.get(tid, tid)  # the global instance this track maps into
             try:
-                if tid in self._map:
-                    self._map.merge(tid, world, frame=frame_index)
-                    merged.append(tid)
+                if target in self._map:
+                    self._map.merge(target, world, frame=frame_index)
+                    merged.append(target)
                 elif self.tracker.track(tid).hits < self.config.min_hits:
                     pass  # tentative track: not in the map until confirmed
                 else:
@@ -471,7 +479,7 @@ class Mapper:
             except ValueError as exc:  # degenerate geometry (e.g. a collapsed detection)
                 self.stats.merge_failures += 1
                 if len(self.stats.failures) < 20:
-                    self.stats.failures.append(f"frame {frame_index}, id {tid}: {exc}")
+                    self.stats.failures.append(f"frame {frame_index}, id {target}: {exc}")
                 continue
             self.tracker.set_points(tid, world)
         self.stats.inserted += len(inserted)
