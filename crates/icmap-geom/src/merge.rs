@@ -10,6 +10,16 @@
 
 use crate::error::{GeomError, Result};
 use crate::fit::fit_curve;
+
+/// The smoothing fit of the spliced points; where FITPACK's system is singular for this input
+/// (a zig-zag detection can make the smoothing spline leave the data), the spliced polyline itself
+/// resampled at `spacing`, so that a merge of valid geometry never fails.
+fn fit_or_polyline(points: &[Point], s: f64, spacing: f64) -> Result<Vec<Point>> {
+    match fit_curve(points, s, spacing) {
+        Err(GeomError::Degenerate { .. }) => resample_spacing(points, spacing, false),
+        other => other,
+    }
+}
 use crate::resample::{cumulative_lengths, dedup, polyline_length, resample_spacing};
 use crate::types::{validate_points, Point};
 use crate::union::polygon_union;
@@ -157,7 +167,7 @@ pub fn merge_polyline(
     }
     let gcum = cumulative_lengths(&g);
     if gcum[gcum.len() - 1] <= DEDUP_EPS {
-        return fit_curve(&d, s, spacing);
+        return fit_or_polyline(&d, s, spacing);
     }
     let mut projector = Projector::new(&g, &gcum);
     let proj: Vec<(f64, Vector2<f64>)> = d.iter().map(|p| projector.project(p)).collect();
@@ -196,7 +206,7 @@ pub fn merge_polyline(
             .filter(|(_, &c)| c > s_hi + margin)
             .map(|(p, _)| *p),
     );
-    fit_curve(&combined, s, spacing)
+    fit_or_polyline(&combined, s, spacing)
 }
 
 /// Convex hull (Andrew's monotone chain), counter-clockwise, without collinear points.
@@ -515,5 +525,42 @@ mod degenerate_tests {
             merge_polyline(&g, &d, 0.5, 1.0),
             Err(GeomError::Degenerate { .. })
         ));
+    }
+}
+
+#[cfg(test)]
+mod fallback_tests {
+    use super::*;
+
+    fn pts(v: &[[f64; 2]]) -> Vec<Point> {
+        v.iter().map(|p| Point::new(p[0], p[1])).collect()
+    }
+
+    /// Short zig-zag detections (what an untrained detector produces) for which FITPACK's
+    /// smoothing system is singular: the merge falls back to the spliced polyline instead of
+    /// failing.
+    #[test]
+    fn singular_fit_falls_back_to_the_polyline() {
+        let zig = pts(&[
+            [0.811, 0.758],
+            [2.297, 1.554],
+            [2.199, 1.544],
+            [2.153, 1.397],
+        ]);
+        let zag = pts(&[
+            [1.695, 0.277],
+            [2.075, -0.235],
+            [1.901, 0.83],
+            [1.969, -0.408],
+        ]);
+        let global = pts(&[[-5.0, 0.5], [0.0, 0.5], [5.0, 0.5]]);
+        for d in [&zig, &zag] {
+            assert!(matches!(
+                fit_curve(d, 0.5, 1.0),
+                Err(GeomError::Degenerate { .. })
+            ));
+            let out = merge_polyline(&global, d, 0.5, 1.0).unwrap();
+            assert!(out.len() >= 2 && out.iter().all(|p| p.x.is_finite() && p.y.is_finite()));
+        }
     }
 }

@@ -183,6 +183,7 @@ class Stage2Objective(nn.Module):
         self.association = net.association
         self.fusion = net.fusion
         self.map_factory = map_factory  # default: icmapper.GlobalMap (the Rust engine)
+        self.merge_failures = 0  # merges skipped on degenerate geometry
         self.criterion = DetectionCriterion(
             cfg.model.num_classes, cfg.stage1.cls_weight, cfg.stage1.pts_weight
         )
@@ -267,10 +268,15 @@ class Stage2Objective(nn.Module):
                 final = fused[-1].detach().cpu().numpy().astype(np.float64)  # (M, P, 2)
                 for j, i in enumerate(ids):
                     world = ego_to_world(final[j], pose)  # (P, 2)
-                    if i in gmap:
-                        gmap.merge(i, world, frame=t)
-                    else:
-                        gmap.insert_with_id(i, int(cls[j]), world, frame=t)
+                    try:
+                        if i in gmap:
+                            gmap.merge(i, world, frame=t)
+                        else:
+                            gmap.insert_with_id(i, int(cls[j]), world, frame=t)
+                    except ValueError:
+                        # degenerate geometry (a collapsed or zig-zag detection): the map keeps
+                        # what it had, as the online Mapper does
+                        self.merge_failures += 1
         l_fusion = total / max(1, n_terms)
         return {
             "loss": cfg.stage2.lambda_fusion * l_fusion,
