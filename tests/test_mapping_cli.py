@@ -40,20 +40,28 @@ def test_map_refuses_existing_run(tmp_path: Path, capsys: pytest.CaptureFixture[
     assert (out / "icmapper" / "run.json").read_bytes() == before
 
 
-def test_compare_three_methods(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+def test_compare_all_oracle_methods(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / "cmp"
     code = main(
-        ["compare", *SRC, "--methods", "icmapper,post-track,cluster-fit", "--out", str(out)]
+        [
+            "compare",
+            *SRC,
+            "--methods",
+            "icmapper,post-track,vma,cluster-fit,polymerge",
+            "--out",
+            str(out),
+        ]
     )
     assert code == 0
     text = capsys.readouterr().out
     for title in ("### Detection", "### Tracking", "### Global map"):
         assert title in text
-    for m in ("icmapper", "post-track", "cluster-fit"):
+    methods = ["cluster-fit", "icmapper", "polymerge", "post-track", "vma"]
+    for m in methods:
         assert f"| {m} |" in text
     assert (out / "report.md").is_file() and "### Global map" in (out / "report.md").read_text()
     results = json.loads((out / "results.json").read_text())["runs"]
-    assert sorted(r["method"] for r in results) == ["cluster-fit", "icmapper", "post-track"]
+    assert sorted(r["method"] for r in results) == methods
     ours = next(r for r in results if r["method"] == "icmapper")
     # Same bounds as the "low" oracle replay test (tests/test_mapping_mapper.py) for dividers and
     # boundaries. Crossings are left out: on this drive (sim-10060-0) crossing 64000 is in range

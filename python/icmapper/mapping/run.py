@@ -31,7 +31,7 @@ METHODS = (
 )
 _BASELINE_NAMES = {
     "post-track": "post_track",
-    "vma": "vma",
+    "vma": "vma_merge",
     "cluster-fit": "cluster_fit",
     "polymerge": "polymerge",
 }
