@@ -179,8 +179,13 @@ def test_checkpoint_roundtrip_and_errors(tmp_path: Path) -> None:
     for (k, v), (_, w) in zip(net.state_dict().items(), net2.state_dict().items(), strict=True):
         assert torch.equal(v, w), k
     (tmp_path / "bad.pt").write_bytes(b"not a checkpoint")
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match="bad.pt is unreadable") as err:
         load_checkpoint(tmp_path / "bad.pt")
+    assert "weights_only=False" not in str(err.value)  # never advise unsafe loading
+    # a pickle with arbitrary objects is refused (weights_only=True), never executed
+    torch.save({"format": "icmapper-checkpoint", "obj": object()}, tmp_path / "evil.pt")
+    with pytest.raises(ValueError, match="not a tensors-only"):
+        load_checkpoint(tmp_path / "evil.pt")
     with pytest.raises(OSError):
         load_checkpoint(tmp_path / "missing.pt")
 

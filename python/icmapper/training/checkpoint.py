@@ -58,7 +58,12 @@ def load_checkpoint(path: str | Path, map_location: str | torch.device = "cpu") 
     try:
         blob = torch.load(path, map_location=map_location, weights_only=True)
     except Exception as exc:  # corrupt / foreign file
-        raise ValueError(f"checkpoint {path} is unreadable: {exc}") from None
+        # torch's own message suggests weights_only=False, which we never do (untrusted files):
+        # name the file and the kind of failure only
+        first = str(exc).strip().splitlines()[0] if str(exc).strip() else ""
+        if "weights_only" in first or "Weights only" in first:
+            first = "not a tensors-only (safe to load) torch checkpoint"
+        raise ValueError(f"checkpoint {path} is unreadable: {first}") from None
     if not isinstance(blob, dict) or blob.get("format") != FORMAT:
         raise ValueError(f"{path} is not an icmapper checkpoint")
     if blob.get("version") != VERSION:
