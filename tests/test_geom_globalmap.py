@@ -374,3 +374,19 @@ def test_one_map_from_many_threads() -> None:
     assert m.ids().tolist() == all_ids
     for i in all_ids:
         assert m.info(i)["observations"] == 2
+
+
+def test_replace_keeps_bookkeeping_and_errors_leave_instance_unchanged() -> None:
+    m = GlobalMap()
+    i = m.insert(1, np.array([[0.0, 0.0], [10.0, 0.0]]), frame=2)
+    m.replace(i, np.array([[0.0, 1.0], [20.0, 1.0]], dtype=np.float32), frame=5)
+    info = m.info(i)
+    assert (info["first_frame"], info["last_frame"], info["observations"]) == (2, 5, 2)
+    cls, pts = m.get(i)
+    assert cls == 1 and np.allclose(pts[[0, -1]], [[0.0, 1.0], [20.0, 1.0]])
+    assert list(m.query((10.0, 1.0, 0.0), (1.0, 1.0))) == [i]
+    with pytest.raises(ValueError, match="NaN"):
+        m.replace(i, np.array([[0.0, np.nan], [1.0, 1.0]]), frame=6)
+    with pytest.raises(KeyError):
+        m.replace(999, np.array([[0.0, 0.0], [1.0, 1.0]]))
+    assert m.info(i)["last_frame"] == 5 and np.array_equal(m.get(i)[1], pts)

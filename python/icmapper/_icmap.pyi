@@ -139,6 +139,12 @@ class GlobalMap:
         for polylines, union for crossings). KeyError for an unknown id; on error the instance is
         unchanged."""
 
+    def replace(self, id: int, points: ArrayLike2, frame: int = 0) -> None:
+        """Replaces the geometry of instance ``id`` with ``points`` (n, 2) world frame (resampled at
+        ``spacing``) as a new observation at ``frame``: first frame kept, last frame and
+        observation count updated. For merge rules implemented outside the store (baselines).
+        KeyError for an unknown id; ValueError for bad geometry (the instance is unchanged)."""
+
     def remove(self, id: int) -> None:
         """Removes instance ``id``; KeyError if absent."""
 

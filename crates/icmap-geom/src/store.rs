@@ -349,11 +349,30 @@ impl GlobalMap {
         };
         // Keep the store's invariants whatever the merge produced.
         validate_points(&merged, if inst.closed { 3 } else { 2 }, "merged geometry")?;
-        let aabb = points_aabb(&merged);
+        self.commit(slot, id, merged, frame)
+    }
+
+    /// Replaces the geometry of instance `id` with `points` (resampled at `spacing` as on insert)
+    /// as a new observation at `frame`: the bookkeeping continues (first frame kept, last frame
+    /// and observation count updated) — for merge rules implemented outside the store, e.g. the
+    /// VMA and PolyMerge baselines. On error the instance is unchanged.
+    pub fn replace(&mut self, id: u64, points: &[Point], frame: i64) -> Result<()> {
+        let slot = *self.id_to_slot.get(&id).ok_or(GeomError::UnknownId(id))?;
+        let class = self.slots[slot as usize]
+            .as_ref()
+            .ok_or(GeomError::UnknownId(id))?
+            .class;
+        let stored = self.prepare(class, points)?;
+        self.commit(slot, id, stored, frame)
+    }
+
+    /// Stores new geometry of the instance in `slot` as one more observation at `frame`.
+    fn commit(&mut self, slot: u32, id: u64, points: Vec<Point>, frame: i64) -> Result<()> {
+        let aabb = points_aabb(&points);
         let inst = self.slots[slot as usize]
             .as_mut()
             .ok_or(GeomError::UnknownId(id))?;
-        inst.points = merged;
+        inst.points = points;
         inst.first_frame = inst.first_frame.min(frame);
         inst.last_frame = inst.last_frame.max(frame);
         inst.observations = inst.observations.saturating_add(1);
@@ -1009,5 +1028,38 @@ mod tests {
                 return Err(TestCaseError::fail(e));
             }
         }
+    }
+
+    #[test]
+    fn replace_keeps_bookkeeping_and_index() {
+        let mut m = GlobalMap::new(MapConfig::default()).unwrap();
+        let id = m
+            .insert(
+                MapClass::Divider,
+                &[Point::new(0.0, 0.0), Point::new(10.0, 0.0)],
+                3,
+            )
+            .unwrap();
+        let far = [Point::new(100.0, 50.0), Point::new(120.0, 50.0)];
+        m.replace(id, &far, 7).unwrap();
+        let inst = m.get(id).unwrap();
+        assert_eq!(
+            (inst.first_frame, inst.last_frame, inst.observations),
+            (3, 7, 2)
+        );
+        assert!((inst.points[0] - far[0]).norm() < 1e-12);
+        let old_patch = Patch::new(Pose2::new(5.0, 0.0, 0.0).unwrap(), 5.0, 5.0, 0.0).unwrap();
+        let new_patch = Patch::new(Pose2::new(110.0, 50.0, 0.0).unwrap(), 5.0, 5.0, 0.0).unwrap();
+        assert!(m.query(&old_patch).is_empty());
+        assert_eq!(m.query(&new_patch), vec![id]);
+        assert!(matches!(
+            m.replace(id, &[far[0]], 8),
+            Err(GeomError::TooFewPoints { .. })
+        ));
+        assert_eq!(m.get(id).unwrap().last_frame, 7); // unchanged on error
+        assert!(matches!(
+            m.replace(99, &far, 8),
+            Err(GeomError::UnknownId(99))
+        ));
     }
 }

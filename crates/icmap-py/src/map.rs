@@ -153,6 +153,21 @@ impl PyGlobalMap {
         py.detach(|| self.write()?.merge(id, &pts, frame).py_err())
     }
 
+    /// Replaces the geometry of instance `id` (world frame) as a new observation at `frame`,
+    /// keeping its bookkeeping (for merge rules implemented outside the store).
+    #[pyo3(signature = (id, points, frame = 0))]
+    fn replace(
+        &self,
+        py: Python<'_>,
+        id: &Bound<'_, PyAny>,
+        points: &Bound<'_, PyAny>,
+        frame: i64,
+    ) -> PyResult<()> {
+        let id = id_arg(id)?;
+        let pts = points_arg(points, "points")?;
+        py.detach(|| self.write()?.replace(id, &pts, frame).py_err())
+    }
+
     /// Removes instance `id` (KeyError if absent).
     fn remove(&self, py: Python<'_>, id: &Bound<'_, PyAny>) -> PyResult<()> {
         let id = id_arg(id)?;

@@ -23,7 +23,6 @@ import numpy as np
 from icmapper.data.types import Frame, MapClass, PerceptionRange, RANGE_60x30
 from icmapper.mapping.baselines.common import check_threshold, new_global_map, read_frame
 from icmapper.mapping.baselines.splice import overlap_fraction, splice_polyline
-from icmapper.mapping.baselines.vma import replace_instance
 from icmapper.mapping.types import DetectionSource, StepResult
 
 if TYPE_CHECKING:
@@ -96,7 +95,7 @@ class PolyMerge:
                 else:
                     _, stored = self.map.get(best)
                     new = splice_polyline(np.asarray(stored, np.float64), world, self.buffer)
-                    replace_instance(self.map, best, cls, new, frame.index)
+                    self.map.replace(best, new, frame.index)
                 merged.append(best)
             ids[i] = best
         return StepResult(frame.index, dets, ids, dets.points.copy(), inserted, merged)

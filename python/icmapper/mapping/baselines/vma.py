@@ -5,9 +5,8 @@ Instead of IC-Mapper's curve fit, a newer observation of a track edits the store
 it — and *concatenation* — the stored points beyond either end of the new observation are kept and
 joined to it in order (`splice.splice_polyline`). For a crossing, the new ring replaces the stored
 one where they overlap and the stored vertices it does not cover are kept (convex hull of both;
-`splice_ring`). The edited geometry is written back with remove + insert_with_id (the engine has no
-in-place replace), so the instance keeps its id; the engine's bookkeeping (first frame, number of
-observations) restarts at the latest frame.
+`splice_ring`). The edited geometry is written back with the engine's `replace`, so the instance
+keeps its id and its bookkeeping (first frame, number of observations).
 """
 
 from __future__ import annotations
@@ -25,7 +24,7 @@ from icmapper.mapping.tracker import DEFAULT_AFFINITY_SCALE
 from icmapper.mapping.types import DetectionSource
 
 if TYPE_CHECKING:
-    from icmapper._icmap import GlobalMap
+    pass
 
 
 class VmaMerge(PostTrack):
@@ -62,7 +61,7 @@ class VmaMerge(PostTrack):
             new = splice_ring(np.asarray(stored, np.float64), world, self.overlap)
         else:
             new = splice_polyline(np.asarray(stored, np.float64), world, self.overlap)
-        replace_instance(self.map, tid, cls, new, frame)
+        self.map.replace(tid, new, frame)
         return True
 
 
@@ -79,17 +78,3 @@ def splice_ring(
         return pts[ConvexHull(pts).vertices]
     except QhullError:
         return new  # degenerate (collinear) points: keep the new observation as it is
-
-
-def replace_instance(
-    gmap: GlobalMap, gid: int, cls: int, points: NDArray[np.float64], frame: int
-) -> None:
-    """Replaces the geometry of instance `gid` (remove + insert_with_id); if the engine rejects the
-    new points, the old instance is put back and the error re-raised."""
-    old_cls, old_pts = gmap.get(gid)
-    gmap.remove(gid)
-    try:
-        gmap.insert_with_id(gid, cls, points, frame)
-    except Exception:
-        gmap.insert_with_id(gid, old_cls, old_pts, frame)
-        raise
