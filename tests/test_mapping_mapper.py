@@ -15,7 +15,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-import tomllib
 from icmapper.data.gt import global_gt, sequence_gt
 from icmapper.data.sources import open_source
 from icmapper.data.types import Frame, FrameGT, RANGE_60x30, Sequence
@@ -410,37 +409,6 @@ def test_save_midrun_and_resume(
 
 
 # ----------------------------------------------------------------------------- 5. learned path
-@pytest.fixture(scope="module")
-def tiny_checkpoint(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """A freshly initialised checkpoint of a tiny version of configs/small.toml (32x88 images)."""
-    import torch
-    from icmapper.training.checkpoint import save_checkpoint
-    from icmapper.training.config import config_from_dict, config_to_dict
-    from icmapper.training.objectives import ICMapperNet
-
-    raw = tomllib.loads((REPO / "configs" / "small.toml").read_text())
-    raw["name"] = "tiny"
-    raw["model"].update(
-        backbone_widths=[8, 8, 8],
-        channels=32,
-        bev_x=20,
-        bev_y=10,
-        num_queries=10,
-        num_layers=2,
-        topk=5,
-        fusion_layers=1,
-    )
-    raw["data"]["image_size"] = [32, 88]
-    cfg = config_from_dict(raw)
-    torch.manual_seed(0)
-    net = ICMapperNet(cfg)
-    path = tmp_path_factory.mktemp("ckpt") / "tiny.pt"
-    save_checkpoint(
-        path, model=net.state_dict(), optimizer=None, stage=1, step=0, config=config_to_dict(cfg)
-    )
-    return path
-
-
 @pytest.fixture(scope="module")
 def rendered() -> Sequence:
     return open_source("sim:val:1", image_size=(32, 88), render=True)[0]

@@ -11,7 +11,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-import tomllib
 from icmapper.data.sources import open_source
 from icmapper.data.types import Sequence
 from icmapper.mapping.mapper import Mapper, MapperConfig, state_path
@@ -95,37 +94,6 @@ def test_oracle_resume_identical(tmp_path: Path, sim_seq: Sequence) -> None:
 
 
 # ------------------------------------------------------------------------------------ learned
-@pytest.fixture(scope="module")
-def tiny_checkpoint(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """A freshly initialised checkpoint of a tiny version of configs/small.toml (32x88 images)."""
-    import torch
-    from icmapper.training.checkpoint import save_checkpoint
-    from icmapper.training.config import config_from_dict, config_to_dict
-    from icmapper.training.objectives import ICMapperNet
-
-    raw = tomllib.loads((REPO / "configs" / "small.toml").read_text())
-    raw["name"] = "tiny"
-    raw["model"].update(
-        backbone_widths=[8, 8, 8],
-        channels=32,
-        bev_x=20,
-        bev_y=10,
-        num_queries=10,
-        num_layers=2,
-        topk=5,
-        fusion_layers=1,
-    )
-    raw["data"]["image_size"] = [32, 88]
-    cfg = config_from_dict(raw)
-    torch.manual_seed(0)
-    net = ICMapperNet(cfg)
-    path = tmp_path_factory.mktemp("ckpt") / "tiny.pt"
-    save_checkpoint(
-        path, model=net.state_dict(), optimizer=None, stage=1, step=0, config=config_to_dict(cfg)
-    )
-    return path
-
-
 def test_learned_resume_identical(tmp_path: Path, tiny_checkpoint: Path) -> None:
     """The detector memory (BEV, propagated queries, last pose), the buffer with its query
     features and the map are restored: the continuation is bit-identical (CPU, one thread, the
