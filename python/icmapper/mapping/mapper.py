@@ -569,7 +569,7 @@ class Mapper:
 
         track_ids = self._associate(det, pose)  # times "association" and "tracking"
         t2 = time.perf_counter()
-        hist_ids, _, hist_pts, _ = self._map.sample_patch(
+        hist_ids, hist_cls, hist_pts, _ = self._map.sample_patch(
             xyyaw,
             (self.rng.half_x, self.rng.half_y),
             margin=cfg.fusion_margin,
@@ -578,7 +578,7 @@ class Mapper:
         hist_row = {int(i): j for j, i in enumerate(hist_ids.tolist())}
         t2b = time.perf_counter()
         sec["sampling"] += t2b - t2
-        track_ids = self._reidentify(det, track_ids, hist_row, hist_pts)
+        track_ids = self._reidentify(det, track_ids, hist_row, hist_cls, hist_pts)
         t3 = time.perf_counter()
         sec["tracking"] += t3 - t2b
         fused = self._fuse(det, track_ids, hist_row, hist_pts)  # (m, P, 2) ego
@@ -642,9 +642,11 @@ class Mapper:
         det: Detections,
         track_ids: NDArray[np.int64],
         hist_row: dict[int, int],
+        hist_cls: NDArray[np.int64],
         hist_pts: NDArray[np.float32],
     ) -> NDArray[np.int64]:
-        """New tracks lying on a same-class global instance take its id (see module docstring)."""
+        """New tracks lying on a same-class global instance take its id (see module docstring).
+        hist_row: global id -> row of the sampled history (hist_cls (k,), hist_pts (k, S, 2))."""
         limit = self.config.reid_distance
         if limit <= 0 or not hist_row:
             return track_ids
@@ -654,7 +656,7 @@ class Mapper:
             if tid in self._map or tid in hist_row or tid in self._alias:
                 continue  # an existing instance: nothing to re-identify
             cls = int(det.classes[j])
-            cands = [(gid, row) for gid, row in hist_row.items() if self._map.get(gid)[0] == cls]
+            cands = [(gid, row) for gid, row in hist_row.items() if int(hist_cls[row]) == cls]
             if not cands:
                 continue
             hist = hist_pts[[r for _, r in cands]].astype(np.float64)  # (c, S, 2)

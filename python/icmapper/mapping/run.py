@@ -125,13 +125,21 @@ def method_factory(
         if spec.checkpoint is None and variant not in ("full", "base"):
             raise ValueError(f"method {method} needs the learned detector (--detections learned)")
 
+        built: list = []  # [Mapper, its NetworkDetector] once loaded
+
         def make_mapper(seq: Sequence, records: dict[int, Detections] | None):
             if spec.checkpoint is None:
                 m = Mapper(oracle(seq), config=MapperConfig(), rng=rng, name=method)
                 return m, None
-            m = Mapper.from_checkpoint(spec.checkpoint, device=spec.device, variant=variant)
+            if not built:  # load the checkpoint once; the Mapper is reset for every sequence
+                built.append(
+                    Mapper.from_checkpoint(spec.checkpoint, device=spec.device, variant=variant)
+                )
+                built.append(built[0].source)
+            m, net_source = built
+            m.source = net_source
             if variant in ("full", "no-fusion") and records is None:
-                rec = RecordingSource(m.source)
+                rec = RecordingSource(net_source)
                 m.source = rec
                 return m, rec
             return m, None
@@ -141,16 +149,16 @@ def method_factory(
     from icmapper.mapping import baselines
 
     cls = baselines.BASELINES[_BASELINE_NAMES[method]]
+    net: list = []  # the learned detection source, once loaded
 
     def make_baseline(seq: Sequence, records: dict[int, Detections] | None):
         if spec.checkpoint is None:
             return cls(oracle(seq)), None
         if records is not None:
             return cls(ReplaySource(records)), None
-        from icmapper.mapping.mapper import Mapper
-
-        net_src = Mapper.from_checkpoint(spec.checkpoint, device=spec.device).source
-        rec = RecordingSource(net_src)
+        if not net:  # load the checkpoint once
+            net.append(Mapper.from_checkpoint(spec.checkpoint, device=spec.device).source)
+        rec = RecordingSource(net[0])
         return cls(rec), rec
 
     return make_baseline
