@@ -20,6 +20,7 @@ pub mod resample;
 pub mod store;
 pub mod types;
 pub mod union;
+mod union_fast;
 
 pub use chamfer::{chamfer_distance, chamfer_matrix};
 pub use clip::{clip_polygon, clip_polyline, sample_pieces};

@@ -1,0 +1,543 @@
+//! Fast union of two simple polygons (the common case of a crossing merge), with a strict
+//! fallback rule: any input that is not clearly generic returns `None` and the caller uses the
+//! general overlay (geo / i_overlay) instead.
+//!
+//! # Algorithm
+//!
+//! 1. Both rings are moved to a local frame (origin at the first vertex of the first ring) and
+//!    oriented counter-clockwise. `tol = 1e-7 * extent` (`extent` = the larger side of the joint
+//!    bounding box) is the distance under which two features count as touching: about a hundred
+//!    steps of i_overlay's integer grid (`extent / 2^30`), so that its snapping cannot change a
+//!    topology that is decided here.
+//! 2. One sweep over all edges of both rings, sorted by their smallest x, visits every pair of
+//!    edges whose bounding boxes (grown by `tol`) overlap:
+//!    - two edges of the same ring that are not neighbours must stay `tol` apart (the ring is
+//!      simple), two neighbours must not fold back onto each other (no spike);
+//!    - an edge of each ring: every endpoint must stay `tol` away from the other edge (no touching,
+//!      no shared or collinear-overlapping edges, no crossing near a vertex); a proper crossing
+//!      is recorded with its parameters along both edges.
+//!
+//!    The smallest distance between two segments that do not cross is attained at an endpoint,
+//!    so the endpoint tests plus the crossing test decide "closer than `tol`" exactly.
+//! 3. Without crossings the rings are disjoint or one contains the other (a vertex tested by ray
+//!    casting is at least `tol` from the other boundary). With crossings, the boundary is traced
+//!    Greiner-Hormann style: the crossings are inserted into both rings in order along each edge;
+//!    at every crossing exactly one ring leaves the other one, and the union's boundary goes on
+//!    along that ring. Every crossing lies on exactly one traced loop; the loop with positive area
+//!    is the outer ring, loops with negative area are holes (dropped, as the general path does).
+//! 4. Output rings follow the general path's conventions so that callers see the same result up
+//!    to floating-point rounding: counter-clockwise, largest area first, inner vertices of
+//!    axis-parallel runs removed (i_overlay drops collinear vertices; other nearly collinear ones
+//!    may differ, which moves no boundary), starting where i_overlay starts a contour: at the
+//!    predecessor of the lowest-left vertex (smallest `(x, y)`). A resampled ring depends on
+//!    that start, so it must match.
+//!
+//! # Fallback rule
+//!
+//! `None` (use the general overlay) on: more than [`MAX_VERTICES`] vertices in all, a ring with
+//! (nearly) zero area or an edge shorter than `tol`, a ring that is not simple or has a spike,
+//! any two features of different rings closer than `tol` without a proper crossing between them
+//! (touching, shared or collinear edges, a crossing near a vertex), two crossings closer than
+//! `tol` on one edge, an odd number of crossings, crossings that do not alternate in and out
+//! along a ring, a traversal that does not close, not exactly one outer loop, a union area outside
+//! `[max(area), area_a + area_b]`, or an output start that i_overlay could choose differently
+//! (two lowest-left candidates whose x differ by less than `tol`, or a start or lowest-left vertex
+//! within `tol` of the line through its neighbours).
+
+use crate::types::Point;
+
+/// Above this many vertices in all the general overlay is used (the sweep is quadratic in the
+/// worst case, i_overlay is not).
+pub(crate) const MAX_VERTICES: usize = 2048;
+
+/// Relative distance (to the joint extent) under which two features count as touching.
+const REL_TOL: f64 = 1e-7;
+
+#[derive(Clone, Copy, Debug)]
+struct V {
+    x: f64,
+    y: f64,
+}
+
+impl V {
+    #[inline]
+    fn sub(self, o: V) -> V {
+        V {
+            x: self.x - o.x,
+            y: self.y - o.y,
+        }
+    }
+    #[inline]
+    fn dot(self, o: V) -> f64 {
+        self.x * o.x + self.y * o.y
+    }
+    #[inline]
+    fn cross(self, o: V) -> f64 {
+        self.x * o.y - self.y * o.x
+    }
+}
+
+/// Twice the signed area of a ring.
+fn area2(r: &[V]) -> f64 {
+    let n = r.len();
+    let mut s = 0.0;
+    for i in 0..n {
+        s += r[i].cross(r[(i + 1) % n]);
+    }
+    s
+}
+
+/// Whether `p` is closer than `sqrt(tol2)` to the segment `a`-`b` (`a != b`).
+#[inline]
+fn near(p: V, a: V, b: V, tol2: f64) -> bool {
+    let ab = b.sub(a);
+    let ap = p.sub(a);
+    let t = (ap.dot(ab) / ab.dot(ab)).clamp(0.0, 1.0);
+    let d = V {
+        x: ap.x - ab.x * t,
+        y: ap.y - ab.y * t,
+    };
+    d.dot(d) < tol2
+}
+
+/// Ray casting (half-open rule); `p` must be well away from the ring's boundary.
+fn inside(p: V, r: &[V]) -> bool {
+    let n = r.len();
+    let mut c = false;
+    let mut j = n - 1;
+    for i in 0..n {
+        let (a, b) = (r[i], r[j]);
+        if (a.y > p.y) != (b.y > p.y) && p.x < (b.x - a.x) * (p.y - a.y) / (b.y - a.y) + a.x {
+            c = !c;
+        }
+        j = i;
+    }
+    c
+}
+
+/// One edge of the sweep: ring (0 or 1), index of its first vertex, bounding box grown by tol.
+#[derive(Clone, Copy)]
+struct Edge {
+    ring: u8,
+    i: u32,
+    x0: f64,
+    x1: f64,
+    y0: f64,
+    y1: f64,
+}
+
+/// A proper crossing of edge `ea` of ring 0 with edge `eb` of ring 1.
+#[derive(Clone, Copy)]
+struct Cross {
+    ea: u32,
+    ta: f64,
+    eb: u32,
+    tb: f64,
+    p: V,
+    /// Ring 0 leaves ring 1 here (so ring 1 enters ring 0).
+    a_exits: bool,
+}
+
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Node {
+    Vertex(u32),
+    Cross(u32),
+}
+
+/// Union of two closed rings (no repeated closing point, finite, at least 3 points each) when
+/// both are simple and in general position (see the module doc for the exact rule); `None` asks
+/// the caller to use the general overlay. Outer rings counter-clockwise, largest area first,
+/// holes dropped, each starting at the predecessor of its smallest `(x, y)` (module doc, step 4).
+pub(crate) fn union_two_simple(a: &[Point], b: &[Point]) -> Option<Vec<Vec<Point>>> {
+    let (n, m) = (a.len(), b.len());
+    if n < 3 || m < 3 || n + m > MAX_VERTICES {
+        return None;
+    }
+    let origin = a[0];
+    let to_local = |p: &Point| V {
+        x: p.x - origin.x,
+        y: p.y - origin.y,
+    };
+    let mut ra: Vec<V> = a.iter().map(to_local).collect();
+    let mut rb: Vec<V> = b.iter().map(to_local).collect();
+    let (mut x0, mut x1, mut y0, mut y1) = (
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+    );
+    for p in ra.iter().chain(rb.iter()) {
+        x0 = x0.min(p.x);
+        x1 = x1.max(p.x);
+        y0 = y0.min(p.y);
+        y1 = y1.max(p.y);
+    }
+    let extent = (x1 - x0).max(y1 - y0);
+    if !(extent.is_finite() && extent > 0.0) {
+        return None;
+    }
+    let tol = REL_TOL * extent;
+    let tol2 = tol * tol;
+
+    // Orientation (counter-clockwise) and non-degenerate area. The original vertex order is kept
+    // in `ia`/`ib` so that output vertices are the caller's exact coordinates.
+    let mut area_a = area2(&ra);
+    let mut area_b = area2(&rb);
+    let min_area2 = tol * extent;
+    if !(area_a.abs() > min_area2 && area_b.abs() > min_area2) {
+        return None;
+    }
+    let rev_a = area_a < 0.0;
+    let rev_b = area_b < 0.0;
+    if rev_a {
+        ra.reverse();
+        area_a = -area_a;
+    }
+    if rev_b {
+        rb.reverse();
+        area_b = -area_b;
+    }
+    let orig = |ring: u8, i: usize| -> Point {
+        match (ring, rev_a, rev_b) {
+            (0, false, _) => a[i],
+            (0, true, _) => a[n - 1 - i],
+            (_, _, false) => b[i],
+            (_, _, true) => b[m - 1 - i],
+        }
+    };
+    let rings: [&[V]; 2] = [&ra, &rb];
+
+    // Edges, no edge shorter than tol.
+    let mut edges: Vec<Edge> = Vec::with_capacity(n + m);
+    for (ring, r) in rings.iter().enumerate() {
+        let k = r.len();
+        for i in 0..k {
+            let (p, q) = (r[i], r[(i + 1) % k]);
+            let d = q.sub(p);
+            if d.dot(d) < tol2 {
+                return None;
+            }
+            edges.push(Edge {
+                ring: ring as u8,
+                i: i as u32,
+                x0: p.x.min(q.x) - tol,
+                x1: p.x.max(q.x) + tol,
+                y0: p.y.min(q.y) - tol,
+                y1: p.y.max(q.y) + tol,
+            });
+        }
+    }
+    edges.sort_unstable_by(|e, f| e.x0.total_cmp(&f.x0));
+
+    let seg = |ring: u8, i: u32| -> (V, V) {
+        let r = rings[ring as usize];
+        let i = i as usize;
+        (r[i], r[(i + 1) % r.len()])
+    };
+
+    let mut crosses: Vec<Cross> = Vec::new();
+    for (k, e) in edges.iter().enumerate() {
+        for f in &edges[k + 1..] {
+            if f.x0 > e.x1 {
+                break;
+            }
+            if f.y0 > e.y1 || e.y0 > f.y1 {
+                continue;
+            }
+            let (p1, p2) = seg(e.ring, e.i);
+            let (q1, q2) = seg(f.ring, f.i);
+            if e.ring == f.ring {
+                let len = rings[e.ring as usize].len() as u32;
+                let (i, j) = (e.i, f.i);
+                if (i + 1) % len == j || (j + 1) % len == i {
+                    // Neighbours: the far ends must not come back near the other edge (spike).
+                    let (p, v, q) = if (i + 1) % len == j {
+                        (p1, p2, q2)
+                    } else {
+                        (q1, q2, p2)
+                    };
+                    if near(q, p, v, tol2) || near(p, v, q, tol2) {
+                        return None;
+                    }
+                    // A triangle has every pair adjacent both ways: the test above covers both.
+                    continue;
+                }
+                if near(p1, q1, q2, tol2)
+                    || near(p2, q1, q2, tol2)
+                    || near(q1, p1, p2, tol2)
+                    || near(q2, p1, p2, tol2)
+                {
+                    return None;
+                }
+                let d1 = q2.sub(q1).cross(p1.sub(q1));
+                let d2 = q2.sub(q1).cross(p2.sub(q1));
+                let d3 = p2.sub(p1).cross(q1.sub(p1));
+                let d4 = p2.sub(p1).cross(q2.sub(p1));
+                if (d1 > 0.0) != (d2 > 0.0) && (d3 > 0.0) != (d4 > 0.0) {
+                    return None; // self-crossing ring
+                }
+                continue;
+            }
+            if near(p1, q1, q2, tol2)
+                || near(p2, q1, q2, tol2)
+                || near(q1, p1, p2, tol2)
+                || near(q2, p1, p2, tol2)
+            {
+                return None;
+            }
+            let d1 = q2.sub(q1).cross(p1.sub(q1));
+            let d2 = q2.sub(q1).cross(p2.sub(q1));
+            let d3 = p2.sub(p1).cross(q1.sub(p1));
+            let d4 = p2.sub(p1).cross(q2.sub(p1));
+            if !((d1 > 0.0) != (d2 > 0.0) && (d3 > 0.0) != (d4 > 0.0)) {
+                continue;
+            }
+            // All four are well away from zero here (each endpoint is >= tol from the other
+            // segment and the crossing is proper), so both denominators are non-zero.
+            let (ea, ta, eb, tb, da, db, pa) = if e.ring == 0 {
+                (
+                    e.i,
+                    d1 / (d1 - d2),
+                    f.i,
+                    d3 / (d3 - d4),
+                    p2.sub(p1),
+                    q2.sub(q1),
+                    p1,
+                )
+            } else {
+                (
+                    f.i,
+                    d3 / (d3 - d4),
+                    e.i,
+                    d1 / (d1 - d2),
+                    q2.sub(q1),
+                    p2.sub(p1),
+                    q1,
+                )
+            };
+            if !(ta > 0.0 && ta < 1.0 && tb > 0.0 && tb < 1.0) {
+                return None;
+            }
+            crosses.push(Cross {
+                ea,
+                ta,
+                eb,
+                tb,
+                p: V {
+                    x: pa.x + da.x * ta,
+                    y: pa.y + da.y * ta,
+                },
+                a_exits: da.cross(db) > 0.0,
+            });
+        }
+    }
+
+    let out_ring = |ring: u8| -> Vec<Point> {
+        let len = rings[ring as usize].len();
+        (0..len).map(|i| orig(ring, i)).collect()
+    };
+    if crosses.is_empty() {
+        let rings_out = if inside(ra[0], &rb) {
+            vec![out_ring(1)]
+        } else if inside(rb[0], &ra) {
+            vec![out_ring(0)]
+        } else if area_a >= area_b {
+            vec![out_ring(0), out_ring(1)]
+        } else {
+            vec![out_ring(1), out_ring(0)]
+        };
+        return rings_out.into_iter().map(finish_ring).collect();
+    }
+    if crosses.len() % 2 != 0 {
+        return None;
+    }
+
+    // Node sequences of both rings with the crossings inserted in order along each edge.
+    let nodes_of = |ring: u8| -> Option<(Vec<Node>, Vec<u32>)> {
+        let r = rings[ring as usize];
+        let mut ids: Vec<u32> = (0..crosses.len() as u32).collect();
+        let key = |c: &Cross| {
+            if ring == 0 {
+                (c.ea, c.ta)
+            } else {
+                (c.eb, c.tb)
+            }
+        };
+        ids.sort_unstable_by(|&i, &j| {
+            let (ei, ti) = key(&crosses[i as usize]);
+            let (ej, tj) = key(&crosses[j as usize]);
+            ei.cmp(&ej).then(ti.total_cmp(&tj))
+        });
+        let mut nodes = Vec::with_capacity(r.len() + ids.len());
+        let mut pos = vec![0u32; crosses.len()];
+        let mut it = ids.iter().peekable();
+        for i in 0..r.len() as u32 {
+            nodes.push(Node::Vertex(i));
+            let mut last_t: Option<f64> = None;
+            while let Some(&&c) = it.peek() {
+                let (e, t) = key(&crosses[c as usize]);
+                if e != i {
+                    break;
+                }
+                if let Some(lt) = last_t {
+                    let (p, q) = (r[i as usize], r[(i as usize + 1) % r.len()]);
+                    let d = q.sub(p);
+                    if (t - lt) * (t - lt) * d.dot(d) < tol2 {
+                        return None;
+                    }
+                }
+                last_t = Some(t);
+                pos[c as usize] = nodes.len() as u32;
+                nodes.push(Node::Cross(c));
+                it.next();
+            }
+        }
+        Some((nodes, pos))
+    };
+    let (nodes_a, pos_a) = nodes_of(0)?;
+    let (nodes_b, pos_b) = nodes_of(1)?;
+
+    // Exits and entries alternate along each ring.
+    for (ring, nodes) in [(0u8, &nodes_a), (1u8, &nodes_b)] {
+        let mut last: Option<bool> = None;
+        for node in nodes.iter() {
+            if let Node::Cross(c) = *node {
+                let exits = crosses[c as usize].a_exits == (ring == 0);
+                if last == Some(exits) {
+                    return None;
+                }
+                last = Some(exits);
+            }
+        }
+    }
+
+    // Trace the loops.
+    let mut visited = vec![false; crosses.len()];
+    let mut outer: Option<Vec<Point>> = None;
+    let mut holes_area2 = 0.0;
+    let max_steps = nodes_a.len() + nodes_b.len() + 1;
+    for start in 0..crosses.len() {
+        if visited[start] {
+            continue;
+        }
+        let mut ring_pts: Vec<Point> = Vec::new();
+        let mut local: Vec<V> = Vec::new();
+        let mut c = start;
+        let mut steps = 0usize;
+        loop {
+            visited[c] = true;
+            let cr = crosses[c];
+            local.push(cr.p);
+            ring_pts.push(Point::new(cr.p.x + origin.x, cr.p.y + origin.y));
+            // Continue along the ring that leaves the other one here.
+            let ring: u8 = if cr.a_exits { 0 } else { 1 };
+            let (nodes, pos) = if ring == 0 {
+                (&nodes_a, &pos_a)
+            } else {
+                (&nodes_b, &pos_b)
+            };
+            let mut k = pos[c] as usize;
+            let next = loop {
+                k = (k + 1) % nodes.len();
+                steps += 1;
+                if steps > max_steps {
+                    return None;
+                }
+                match nodes[k] {
+                    Node::Vertex(i) => {
+                        local.push(rings[ring as usize][i as usize]);
+                        ring_pts.push(orig(ring, i as usize));
+                    }
+                    Node::Cross(j) => break j as usize,
+                }
+            };
+            // Arriving along `ring`, which must enter the other ring at `next`.
+            if (crosses[next].a_exits == (ring == 0)) || (next != start && visited[next]) {
+                return None;
+            }
+            if next == start {
+                break;
+            }
+            c = next;
+        }
+        let a2 = area2(&local);
+        if a2 > 0.0 {
+            if outer.is_some() {
+                return None;
+            }
+            outer = Some(ring_pts);
+        } else {
+            holes_area2 += a2;
+        }
+    }
+    let outer = outer?;
+    let outer_area2 = area2(&outer.iter().map(to_local).collect::<Vec<_>>());
+    let union2 = outer_area2 + holes_area2;
+    let slack = 2.0 * tol * extent;
+    if !(union2 >= area_a.max(area_b) - slack && union2 <= area_a + area_b + slack) {
+        return None;
+    }
+    Some(vec![finish_ring(outer)?])
+}
+
+/// Drops the inner vertices of axis-parallel runs and rotates the ring to start where i_overlay
+/// starts its contours (the predecessor of the lowest-left vertex). `None` when that choice is
+/// not certain on i_overlay's grid: another vertex's x within a hair of the smallest x, or the
+/// start or lowest-left vertex within a hair of the line through its neighbours (i_overlay could
+/// drop it as collinear); also when fewer than 3 vertices remain.
+fn finish_ring(ring: Vec<Point>) -> Option<Vec<Point>> {
+    let n = ring.len();
+    let mut kept: Vec<Point> = Vec::with_capacity(n);
+    for i in 0..n {
+        let (p, c, q) = (ring[(i + n - 1) % n], ring[i], ring[(i + 1) % n]);
+        // Only axis-parallel runs are dropped: they stay collinear on i_overlay's grid. Other
+        // nearly collinear vertices may or may not be dropped there, which moves no boundary.
+        let on_x_line = p.x == c.x && c.x == q.x;
+        let on_y_line = p.y == c.y && c.y == q.y;
+        if !(on_x_line || on_y_line) {
+            kept.push(c);
+        }
+    }
+    if kept.len() < 3 {
+        return None;
+    }
+    let (mut x0, mut x1, mut y0, mut y1) = (
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+    );
+    for p in &kept {
+        x0 = x0.min(p.x);
+        x1 = x1.max(p.x);
+        y0 = y0.min(p.y);
+        y1 = y1.max(p.y);
+    }
+    let hair = REL_TOL * (x1 - x0).max(y1 - y0);
+    let mut best = 0;
+    for (i, p) in kept.iter().enumerate() {
+        let b = kept[best];
+        if p.x < b.x || (p.x == b.x && p.y < b.y) {
+            best = i;
+        }
+    }
+    let bx = kept[best].x;
+    if kept.iter().any(|p| p.x != bx && p.x - bx < hair) {
+        return None;
+    }
+    // i_overlay starts a contour at the far end of the lowest-left vertex's upper link, which on
+    // a counter-clockwise ring is that vertex's predecessor.
+    let len = kept.len();
+    let start = (best + len - 1) % len;
+    // A start or lowest-left vertex that is collinear with its neighbours up to a hair could be
+    // dropped by i_overlay (collinear on its grid): the contour would start elsewhere.
+    for i in [start, best] {
+        let (p, c, q) = (kept[(i + len - 1) % len], kept[i], kept[(i + 1) % len]);
+        let pq = q - p;
+        if (c - p).perp(&pq).abs() < hair * pq.norm() {
+            return None;
+        }
+    }
+    kept.rotate_left(start);
+    Some(kept)
+}
