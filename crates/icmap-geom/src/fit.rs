@@ -55,30 +55,6 @@ impl SplineCurve {
         self.eval_in(u, l)
     }
 
-    /// The curve at each of the parameters `us`, best non-decreasing (same values as
-    /// [`Self::eval`], the knot interval found by a walk from the previous one instead of a binary
-    /// search).
-    fn eval_sorted(&self, us: &[f64]) -> Vec<Point> {
-        let k = self.degree;
-        let t = &self.knots;
-        let nk1 = t.len() - k - 1;
-        let mut l = k;
-        us.iter()
-            .map(|&u| {
-                let u = u.clamp(t[k], t[nk1]);
-                // As in `eval`: the largest l <= nk1 - 1 with t[l] <= u (t[k] <= u always);
-                // walks back too, so unsorted input still gives the same values.
-                while l > k && t[l] > u {
-                    l -= 1;
-                }
-                while l + 1 < nk1 && t[l + 1] <= u {
-                    l += 1;
-                }
-                self.eval_in(u, l)
-            })
-            .collect()
-    }
-
     /// The curve at `u` in knot interval `l`.
     fn eval_in(&self, u: f64, l: usize) -> Point {
         let k = self.degree;
@@ -94,7 +70,42 @@ impl SplineCurve {
 
 /// The `k + 1` non-zero B-splines of degree `k` at `x` with `t[l] <= x < t[l + 1]` (de Boor-Cox,
 /// FITPACK's `fpbspl`); entry `i` belongs to coefficient `l - k + i`.
+#[inline]
 fn bspline_basis(t: &[f64], k: usize, x: f64, l: usize) -> [f64; 6] {
+    // The same recurrence with the degree known at compile time (unrolled) for the common cubic
+    // and quadratic cases; the arithmetic, and so the result, is identical.
+    match k {
+        3 => basis_of_degree::<3>(t, x, l),
+        2 => basis_of_degree::<2>(t, x, l),
+        _ => basis_of_degree_dyn(t, k, x, l),
+    }
+}
+
+#[inline(always)]
+fn basis_of_degree<const K: usize>(t: &[f64], x: f64, l: usize) -> [f64; 6] {
+    let mut h = [0.0; 6];
+    let mut hh = [0.0; 6];
+    h[0] = 1.0;
+    for j in 1..=K {
+        hh[..j].copy_from_slice(&h[..j]);
+        h[0] = 0.0;
+        for i in 1..=j {
+            let li = l + i;
+            let lj = li - j;
+            let (tli, tlj) = (t[li], t[lj]);
+            if tli == tlj {
+                h[i] = 0.0;
+                continue;
+            }
+            let f = hh[i - 1] / (tli - tlj);
+            h[i - 1] += f * (tli - x);
+            h[i] = f * (x - tlj);
+        }
+    }
+    h
+}
+
+fn basis_of_degree_dyn(t: &[f64], k: usize, x: f64, l: usize) -> [f64; 6] {
     let mut h = [0.0; 6];
     let mut hh = [0.0; 6];
     h[0] = 1.0;
@@ -130,6 +141,21 @@ fn givens(piv: f64, ww: &mut f64) -> (f64, f64) {
         return (1.0, 0.0);
     }
     let (cos, sin) = (*ww / dd, piv / dd);
+    *ww = dd;
+    (cos, sin)
+}
+
+/// [`givens`] for bounded entries (the least-squares system of B-spline values in `[0, 1]`, whose
+/// triangular factor stays below `sqrt(m)`): `hypot` without FITPACK's overflow guard, and one
+/// division instead of three.
+#[inline]
+fn givens_bounded(piv: f64, ww: &mut f64) -> (f64, f64) {
+    let dd = (piv * piv + *ww * *ww).sqrt();
+    if dd == 0.0 {
+        return (1.0, 0.0);
+    }
+    let inv = 1.0 / dd;
+    let (cos, sin) = (*ww * inv, piv * inv);
     *ww = dd;
     (cos, sin)
 }
@@ -178,6 +204,23 @@ fn design(t: &[f64], k: usize, u: &[f64]) -> Design {
     let mut l = k;
     let mut interval = Vec::with_capacity(u.len());
     let mut basis = Vec::with_capacity(u.len());
+    if k == 3 {
+        // The cubic recurrence with the knot-difference reciprocals of the current interval
+        // computed once per interval (data points share intervals).
+        let mut inv = cubic_reciprocals(t, l);
+        for &ui in u {
+            let l0 = l;
+            while ui >= t[l + 1] && l + 1 < nk1 {
+                l += 1;
+            }
+            if l != l0 {
+                inv = cubic_reciprocals(t, l);
+            }
+            interval.push(l);
+            basis.push(cubic_basis(t, &inv, ui, l));
+        }
+        return Design { interval, basis };
+    }
     for &ui in u {
         while ui >= t[l + 1] && l + 1 < nk1 {
             l += 1;
@@ -188,8 +231,61 @@ fn design(t: &[f64], k: usize, u: &[f64]) -> Design {
     Design { interval, basis }
 }
 
+/// `1 / (t[l + i] - t[l + i - j])` for the de Boor-Cox recurrence of degree 3 in interval `l`
+/// (`j = 1..=3`, `i = 1..=j`, row-major), 0 where the knots coincide (that term vanishes).
+fn cubic_reciprocals(t: &[f64], l: usize) -> [f64; 6] {
+    let mut inv = [0.0; 6];
+    let mut q = 0;
+    for j in 1..=3 {
+        for i in 1..=j {
+            let d = t[l + i] - t[l + i - j];
+            inv[q] = if d == 0.0 { 0.0 } else { 1.0 / d };
+            q += 1;
+        }
+    }
+    inv
+}
+
+/// The 4 non-zero cubic B-splines at `x` in interval `l` (as [`bspline_basis`]), with the knot
+/// reciprocals `inv` of [`cubic_reciprocals`] instead of divisions (the recurrence unrolled).
+#[inline]
+fn cubic_basis(t: &[f64], inv: &[f64; 6], x: f64, l: usize) -> [f64; 6] {
+    let (tm2, tm1, t0) = (t[l - 2], t[l - 1], t[l]);
+    let (t1, t2, t3) = (t[l + 1], t[l + 2], t[l + 3]);
+    // Degree 1.
+    let f = inv[0];
+    let (a0, a1) = (f * (t1 - x), f * (x - t0));
+    // Degree 2.
+    let f = a0 * inv[1];
+    let mut b0 = f * (t1 - x);
+    let mut b1 = f * (x - tm1);
+    let f = a1 * inv[2];
+    b1 += f * (t2 - x);
+    let b2 = f * (x - t0);
+    // Degree 3.
+    let f = b0 * inv[3];
+    b0 = f * (t1 - x);
+    let mut c1 = f * (x - tm2);
+    let f = b1 * inv[4];
+    c1 += f * (t2 - x);
+    let mut c2 = f * (x - tm1);
+    let f = b2 * inv[5];
+    c2 += f * (t3 - x);
+    let c3 = f * (x - t0);
+    [b0, c1, c2, c3, 0.0, 0.0]
+}
+
 fn lsq_fit(t: &[f64], k: usize, x: &[[f64; 2]], des: &Design) -> LsqFit {
-    let k1 = k + 1;
+    match k {
+        3 => lsq_fit_of_degree::<3>(t, x, des),
+        2 => lsq_fit_of_degree::<2>(t, x, des),
+        _ => lsq_fit_of_degree::<1>(t, x, des),
+    }
+}
+
+/// [`lsq_fit`] with the degree known at compile time (the inner loops unrolled).
+fn lsq_fit_of_degree<const K: usize>(t: &[f64], x: &[[f64; 2]], des: &Design) -> LsqFit {
+    let k1 = K + 1;
     let nk1 = t.len() - k1;
     let mut r = vec![[0.0; 5]; nk1];
     let mut z = [vec![0.0; nk1], vec![0.0; nk1]];
@@ -197,19 +293,20 @@ fn lsq_fit(t: &[f64], k: usize, x: &[[f64; 2]], des: &Design) -> LsqFit {
     for ((basis, xy), &l) in des.basis.iter().zip(x).zip(&des.interval) {
         let mut h = *basis;
         let mut xi = *xy;
-        let j0 = l - k;
-        for i in 0..k1 {
+        let j0 = l - K;
+        for i in 0..=K {
             let piv = h[i];
             if piv == 0.0 {
                 continue;
             }
             let j = j0 + i;
-            let (cos, sin) = givens(piv, &mut r[j][0]);
+            let row = &mut r[j];
+            let (cos, sin) = givens_bounded(piv, &mut row[0]);
             for d in 0..2 {
                 rotate(cos, sin, &mut xi[d], &mut z[d][j]);
             }
-            for i1 in i + 1..k1 {
-                rotate(cos, sin, &mut h[i1], &mut r[j][i1 - i]);
+            for i1 in i + 1..=K {
+                rotate(cos, sin, &mut h[i1], &mut row[i1 - i]);
             }
         }
         fp += xi[0] * xi[0] + xi[1] * xi[1];
@@ -655,24 +752,46 @@ const GL_WEIGHTS: [f64; 5] = [
     0.239_314_335_249_683_23,
     0.118_463_442_528_094_54,
 ];
+/// The outer nodes of 3-point Gauss-Legendre on `[0, 1]` (the middle one is 0.5, shared with the
+/// 5-point rule) and the weights of the outer and middle nodes.
+const GL3_NODES: [f64; 2] = [0.112_701_665_379_258_31, 0.887_298_334_620_741_7];
+const GL3_W_OUTER: f64 = 5.0 / 18.0;
+const GL3_W_MID: f64 = 8.0 / 18.0;
 /// Relative (to `spacing`) tolerance of a piece's quadrature: a piece is split while its 5-node
-/// Gauss-Legendre length and the sum over its two halves differ by more than this.
+/// and 3-node Gauss-Legendre lengths differ by more than this (the difference estimates the
+/// 3-node rule's error, a bound far above the 5-node rule's).
 const QUAD_TOL: f64 = 1e-5;
-/// Maximal bisection depth of a piece (pieces are at most `spacing` long before splitting).
+/// Length of the arc-length table's pieces before any split, in spacings.
+const PIECE_SPACINGS: f64 = 4.0;
+/// Maximal bisection depth of a piece.
 const QUAD_MAX_DEPTH: u32 = 12;
-/// Relative (to `spacing`) tolerance of the arc-length inversion.
-const INVERT_TOL: f64 = 1e-9;
 
 /// One non-empty knot span `[a, a + w]` of a curve with its derivative `C'(a + w * tau)`,
 /// `tau in [0, 1]`, as a quadratic in `tau` per coordinate (exact for degree <= 3).
 struct Span {
+    /// Start parameter (read by the tests' parameter view of the samples).
+    #[cfg_attr(not(test), allow(dead_code))]
     a: f64,
     w: f64,
     d: [[f64; 3]; 2],
+    /// `C(a)`, the curve at the start of the span.
+    p0: [f64; 2],
 }
 
 impl Span {
+    /// `C(a + w * tau)`: the start point plus the integral of the derivative quadratic (the same
+    /// cubic as the B-spline form, evaluated in power form by Horner's rule).
+    #[inline]
+    fn point(&self, tau: f64) -> Point {
+        let [x, y] = [0, 1].map(|i| {
+            let c = &self.d[i];
+            self.p0[i] + self.w * tau * (c[0] + tau * (c[1] / 2.0 + tau * (c[2] / 3.0)))
+        });
+        Point::new(x, y)
+    }
+
     /// `|dC/dtau|` at `tau` (metres per unit `tau`).
+    #[inline]
     fn speed(&self, tau: f64) -> f64 {
         let [dx, dy] = self.d.map(|c| self.w * (c[0] + tau * (c[1] + tau * c[2])));
         (dx * dx + dy * dy).sqrt()
@@ -734,86 +853,164 @@ impl SplineCurve {
                         2.0 * f0[i] - 4.0 * fh[i] + 2.0 * f1[i],
                     ]
                 });
-                Span { a, w, d }
+                let p = self.eval_in(a, l);
+                Span {
+                    a,
+                    w,
+                    d,
+                    p0: [p.x, p.y],
+                }
             })
             .collect()
     }
 }
 
 /// A piece of the arc-length table: `tau in [t0, t1]` of span `span`, starting at arc length `s0`
-/// and `len` long.
+/// and `len` long (its 5-node Gauss-Legendre length), with its arc-length model `arc` (the
+/// power-form coefficients of [`arc_model`]).
 struct Piece {
     span: usize,
     t0: f64,
     t1: f64,
     s0: f64,
     len: f64,
+    arc: [f64; 6],
 }
 
-/// Splits `[t0, t1]` of span `si` until the quadrature of each half agrees with the whole, and
-/// appends the accepted halves to `out` (arc length accumulated in `*s`).
+/// `INTEGRATED_LAGRANGE[i][j]`: coefficient of `x^j` in `int_0^x l_i`, where `l_i` is the Lagrange
+/// polynomial of the 5 Gauss-Legendre nodes on `[0, 1]` that is 1 at node `i` (at `x = 1` the sum
+/// of row `i` is the node's quadrature weight).
+const INTEGRATED_LAGRANGE: [[f64; 6]; 5] = [
+    [
+        0.0,
+        1.551_408_049_094_313,
+        -6.735_142_250_597_436,
+        12.881_499_685_114_732,
+        -11.247_246_263_969_75,
+        3.667_944_222_886_234_6,
+    ],
+    [
+        0.0,
+        -0.893_158_392_000_071_7,
+        11.462_166_777_861_865,
+        -29.407_603_609_387_63,
+        29.465_853_781_661_753,
+        -10.387_944_222_886_235,
+    ],
+    [
+        0.0,
+        0.533_333_333_333_333_3,
+        -7.466_666_666_666_667,
+        27.377_777_777_777_778,
+        -33.6,
+        13.44,
+    ],
+    [
+        0.0,
+        -0.267_941_652_223_387_5,
+        3.844_963_589_192_847,
+        -15.423_630_711_602_96,
+        22.473_867_332_769_42,
+        -10.387_944_222_886_235,
+    ],
+    [
+        0.0,
+        0.076_358_661_795_812_9,
+        -1.105_321_449_790_609_5,
+        4.571_956_858_098_08,
+        -7.092_474_850_461_424,
+        3.667_944_222_886_234_6,
+    ],
+];
+
+/// The arc-length model of a piece `h` long in `tau` with speeds `v` at the 5 Gauss-Legendre
+/// nodes: `s(x) = h * int_0^x v(y) dy` for the fraction `x in [0, 1]`, where `v` is the quartic
+/// through the 5 speeds (so `s(1)` is exactly the piece's quadrature length). Power-form
+/// coefficients of `s`.
+fn arc_model(h: f64, v: &[f64; 5]) -> [f64; 6] {
+    let mut c = [0.0; 6];
+    for (row, &vi) in INTEGRATED_LAGRANGE.iter().zip(v) {
+        for (cj, &r) in c.iter_mut().zip(row) {
+            *cj += h * vi * r;
+        }
+    }
+    c
+}
+
+/// Appends `[t0, t1]` of span `si` to `out` as one piece when its 5-node and 3-node quadratures
+/// agree to `tol`, else its two halves (recursively); arc length accumulated in `*s`.
 #[allow(clippy::too_many_arguments)]
 fn quad_pieces(
     sp: &Span,
     si: usize,
     t0: f64,
     t1: f64,
-    whole: f64,
     tol: f64,
     depth: u32,
     s: &mut f64,
     out: &mut Vec<Piece>,
 ) {
-    let tm = 0.5 * (t0 + t1);
-    let (l, r) = (sp.length(t0, tm), sp.length(tm, t1));
-    if depth < QUAD_MAX_DEPTH && (l + r - whole).abs() > tol {
-        quad_pieces(sp, si, t0, tm, l, tol, depth + 1, s, out);
-        quad_pieces(sp, si, tm, t1, r, tol, depth + 1, s, out);
+    let h = t1 - t0;
+    let v: [f64; 5] = std::array::from_fn(|i| sp.speed(t0 + h * GL_NODES[i]));
+    let len = h * (0..5).map(|i| GL_WEIGHTS[i] * v[i]).sum::<f64>();
+    let gl3 = h
+        * (GL3_W_OUTER * (sp.speed(t0 + h * GL3_NODES[0]) + sp.speed(t0 + h * GL3_NODES[1]))
+            + GL3_W_MID * v[2]);
+    let err = (len - gl3).abs();
+    // (A NaN difference splits too, down to the depth limit.)
+    if depth < QUAD_MAX_DEPTH && (err > tol || err.is_nan()) {
+        let tm = 0.5 * (t0 + t1);
+        quad_pieces(sp, si, t0, tm, tol, depth + 1, s, out);
+        quad_pieces(sp, si, tm, t1, tol, depth + 1, s, out);
         return;
     }
-    for (a, b, len) in [(t0, tm, l), (tm, t1, r)] {
-        out.push(Piece {
-            span: si,
-            t0: a,
-            t1: b,
-            s0: *s,
-            len,
-        });
-        *s += len;
-    }
+    out.push(Piece {
+        span: si,
+        t0,
+        t1,
+        s0: *s,
+        len,
+        arc: arc_model(h, &v),
+    });
+    *s += len;
 }
 
-/// The parameter `tau` in `piece` at arc length `r` from its start (`0 <= r <= piece.len`):
-/// safeguarded Newton iteration on the quadrature, bracketed by bisection.
-fn invert(sp: &Span, piece: &Piece, r: f64, tol: f64) -> f64 {
-    let (mut lo, mut hi) = (piece.t0, piece.t1);
-    let mut tau = if piece.len > 0.0 {
-        lo + (hi - lo) * (r / piece.len).clamp(0.0, 1.0)
-    } else {
-        lo
-    };
-    for _ in 0..50 {
-        let g = sp.length(piece.t0, tau) - r;
-        if g.abs() <= tol {
+/// The parameter `tau` in `piece` at arc length `r` from its start (`0 <= r <= piece.len`): the
+/// root of the piece's arc-length model ([`arc_model`]) by Newton iteration safeguarded by
+/// bisection. The model integrates the quartic interpolant of the speed, whose error on a piece
+/// that passed the quadrature test is far below the documented `1e-3 * spacing` (tested).
+fn invert(piece: &Piece, r: f64) -> f64 {
+    let (t0, t1) = (piece.t0, piece.t1);
+    if piece.len.is_nan() || piece.len <= 0.0 {
+        return t0;
+    }
+    let c = &piece.arc;
+    let (mut lo, mut hi) = (0.0f64, 1.0f64);
+    let mut x = (r / piece.len).clamp(0.0, 1.0);
+    let tol = 1e-12 * piece.len;
+    for _ in 0..60 {
+        let f = x * (c[1] + x * (c[2] + x * (c[3] + x * (c[4] + x * c[5])))) - r;
+        if f.abs() <= tol {
             break;
         }
-        if g > 0.0 {
-            hi = tau;
+        if f > 0.0 {
+            hi = x;
         } else {
-            lo = tau;
+            lo = x;
         }
-        let v = sp.speed(tau);
-        let next = if v > 0.0 { tau - g / v } else { f64::NAN };
-        tau = if next > lo && next < hi {
+        let df = c[1] + x * (2.0 * c[2] + x * (3.0 * c[3] + x * (4.0 * c[4] + x * 5.0 * c[5])));
+        let next = if df > 0.0 { x - f / df } else { f64::NAN };
+        let next = if next > lo && next < hi {
             next
         } else {
             0.5 * (lo + hi)
         };
-        if hi - lo <= f64::EPSILON * (1.0 + hi.abs()) {
+        x = next;
+        if hi - lo <= 1e-15 {
             break;
         }
     }
-    tau
+    t0 + (t1 - t0) * x
 }
 
 /// Fits a smoothing parametric cubic spline to `points` and returns it evaluated about `spacing`
@@ -826,7 +1023,7 @@ fn invert(sp: &Span, piece: &Piece, r: f64, tol: f64) -> f64 {
 ///
 /// The output has `count = max(2, ceil(L / spacing) + 1)` points, where `L` is the arc length of the
 /// spline (5-node Gauss-Legendre quadrature of `|C'(u)|` on pieces of each knot span, split
-/// adaptively until the quadrature agrees to `1e-5 * spacing`). Every output point is the spline
+/// adaptively until the 5- and 3-node rules agree to `1e-5 * spacing`). Every output point is the spline
 /// evaluated at a parameter `u_i` (so it lies exactly on the spline); the first and last are the
 /// spline's ends `S(0)`, `S(1)`; the arc length from `S(0)` to point `i` is `i * L / (count - 1)`
 /// to within `1e-3 * spacing` (tested), so consecutive points are evenly spaced by arc length
@@ -842,13 +1039,47 @@ pub fn fit_curve(points: &[Point], s: f64, spacing: f64) -> Result<Vec<Point>> {
         });
     }
     let curve = fit_spline(points, s)?;
-    let us = arc_length_params(&curve, spacing)?;
-    Ok(curve.eval_sorted(&us))
+    let (spans, samples) = arc_length_samples(&curve, spacing)?;
+    let mut out: Vec<Point> = samples
+        .iter()
+        .map(|&(si, tau)| spans[si].point(tau))
+        .collect();
+    // The last point is the curve's end, evaluated in B-spline form (exactly `S(1)`).
+    let k = curve.degree;
+    if let Some(last) = out.last_mut() {
+        *last = curve.eval(curve.knots[curve.knots.len() - k - 1]);
+    }
+    Ok(out)
 }
 
 /// The parameters `u_i` of the `max(2, ceil(L / spacing) + 1)` points evenly spaced by arc length
 /// along `curve` (first and last are the curve's ends). See [`fit_curve`].
+#[cfg(test)]
 fn arc_length_params(curve: &SplineCurve, spacing: f64) -> Result<Vec<f64>> {
+    let k = curve.degree;
+    let (u_start, u_end) = (curve.knots[k], curve.knots[curve.knots.len() - k - 1]);
+    let (spans, samples) = arc_length_samples(curve, spacing)?;
+    let last = samples.len() - 1;
+    Ok(samples
+        .iter()
+        .enumerate()
+        .map(|(i, &(si, tau))| {
+            if i == last {
+                u_end
+            } else {
+                (spans[si].a + spans[si].w * tau).clamp(u_start, u_end)
+            }
+        })
+        .collect())
+}
+
+/// A point of the curve as `(span index, tau)`: `C(a + w * tau)` of that span.
+type Sample = (usize, f64);
+
+/// The curve's non-empty knot spans and the `max(2, ceil(L / spacing) + 1)` samples evenly spaced
+/// by arc length along it, each as `(span index, tau)` (the first is the curve's start, the last
+/// its end). See [`fit_curve`].
+fn arc_length_samples(curve: &SplineCurve, spacing: f64) -> Result<(Vec<Span>, Vec<Sample>)> {
     let too_many = |len: f64| GeomError::InvalidParameter {
         name: "spacing",
         reason: format!("length {len} / spacing {spacing} gives too many points"),
@@ -864,11 +1095,10 @@ fn arc_length_params(curve: &SplineCurve, spacing: f64) -> Result<Vec<f64>> {
     let mut pieces = Vec::with_capacity((2.0 * rough / spacing) as usize + 2 * spans.len());
     let mut len = 0.0;
     for (si, (sp, &sl)) in spans.iter().zip(&span_len).enumerate() {
-        let parts = (sl / spacing).ceil().max(1.0) as usize;
+        let parts = (sl / (PIECE_SPACINGS * spacing)).ceil().max(1.0) as usize;
         for j in 0..parts {
             let (t0, t1) = (j as f64 / parts as f64, (j + 1) as f64 / parts as f64);
-            let whole = if parts == 1 { sl } else { sp.length(t0, t1) };
-            quad_pieces(sp, si, t0, t1, whole, tol, 0, &mut len, &mut pieces);
+            quad_pieces(sp, si, t0, t1, tol, 0, &mut len, &mut pieces);
         }
     }
     if !(len.is_finite() && len > 0.0) || pieces.is_empty() {
@@ -883,10 +1113,8 @@ fn arc_length_params(curve: &SplineCurve, spacing: f64) -> Result<Vec<f64>> {
         return Err(too_many(len));
     }
     let count = (ratio as usize + 1).max(2);
-    let k = curve.degree;
-    let (u_start, u_end) = (curve.knots[k], curve.knots[curve.knots.len() - k - 1]);
     let mut out = Vec::with_capacity(count);
-    out.push(u_start);
+    out.push((0, 0.0));
     let mut pi = 0usize;
     for i in 1..count - 1 {
         let target = len * i as f64 / (count - 1) as f64;
@@ -894,12 +1122,11 @@ fn arc_length_params(curve: &SplineCurve, spacing: f64) -> Result<Vec<f64>> {
             pi += 1;
         }
         let piece = &pieces[pi];
-        let sp = &spans[piece.span];
-        let tau = invert(sp, piece, target - piece.s0, INVERT_TOL * spacing);
-        out.push((sp.a + sp.w * tau).clamp(u_start, u_end));
+        let tau = invert(piece, target - piece.s0);
+        out.push((piece.span, tau.clamp(0.0, 1.0)));
     }
-    out.push(u_end);
-    Ok(out)
+    out.push((spans.len() - 1, 1.0));
+    Ok((spans, out))
 }
 
 #[cfg(test)]

@@ -132,8 +132,9 @@ impl<'a> Projector<'a> {
 /// parameter `s` ([`crate::fit::fit_curve`]) and resamples about `spacing` apart. The result keeps the
 /// global instance's direction.
 ///
-/// Orientation: the detection is reversed when its segments run against the global tangent at
-/// their projections (length-weighted dot products; ties broken by the projected end positions).
+/// Orientation: the detection is reversed when its segments run against the global tangents at
+/// the projections of their ends (length-weighted dot products; ties broken by the projected end
+/// positions).
 /// The detection replaces the overlapped part of the global polyline. A zero-length global
 /// polyline is replaced by the detection. Errors on fewer than 2 points, non-finite input, a
 /// negative `s`, a non-positive `spacing`, or an all-degenerate input.
@@ -171,11 +172,11 @@ pub fn merge_polyline(
     }
     let mut projector = Projector::new(&g, &gcum);
     let proj: Vec<(f64, Vector2<f64>)> = d.iter().map(|p| projector.project(p)).collect();
-    // Orientation of the detection relative to the global polyline.
+    // Orientation of the detection relative to the global polyline: each detected segment
+    // against the mean of the global tangents at its two ends' projections.
     let mut score = 0.0;
     for j in 0..d.len() - 1 {
-        let mid = d[j] + (d[j + 1] - d[j]) * 0.5;
-        let (_, tangent) = projector.project(&mid);
+        let tangent = proj[j].1 + proj[j + 1].1;
         score += (d[j + 1] - d[j]).dot(&tangent);
     }
     let (s_first, s_last) = (proj[0].0, proj[proj.len() - 1].0);
