@@ -139,6 +139,20 @@ class GlobalMap:
         for polylines, union for crossings). KeyError for an unknown id; on error the instance is
         unchanged."""
 
+    def merge_many(
+        self,
+        ids: Sequence[int] | npt.NDArray[np.integer[Any]],
+        points: Sequence[ArrayLike2] | npt.NDArray[np.floating[Any]],
+        frame: int = 0,
+    ) -> list[KeyError | ValueError | None]:
+        """Merges ``points[i]`` (n_i, 2) world frame into instance ``ids[i]`` for every i, at
+        ``frame``. The map is exactly the one of calling ``merge`` for each item in order (items
+        for the same instance apply in order); the merges of different instances run in parallel
+        with the GIL released. Returns per item None, or the exception ``merge`` would have
+        raised for it (KeyError for an unknown id, ValueError for bad geometry); a failed item
+        changes nothing and does not affect the others. TypeError/ValueError are raised before
+        any merge for malformed arguments (not a sequence, different lengths, wrong shapes)."""
+
     def replace(self, id: int, points: ArrayLike2, frame: int = 0) -> None:
         """Replaces the geometry of instance ``id`` with ``points`` (n, 2) world frame (resampled at
         ``spacing``) as a new observation at ``frame``: first frame kept, last frame and

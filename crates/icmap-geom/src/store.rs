@@ -13,6 +13,29 @@ use crate::types::{validate_points, MapClass, Patch, Point};
 use parry2d_f64::bounding_volume::Aabb;
 use std::collections::HashMap;
 
+/// The class rule of a merge: the detection `points` (world frame) merged into the current
+/// geometry `current` of an instance (polygon union for a closed crossing ring, curve-fit merge for
+/// a polyline), checked to keep the store's invariants.
+fn merge_rule(
+    closed: bool,
+    current: &[Point],
+    points: &[Point],
+    config: &MapConfig,
+) -> Result<Vec<Point>> {
+    let merged = if closed {
+        let what = "detected crossing ring";
+        validate_points(points, 2, what)?;
+        let ring = dedup(points, DEDUP_EPS, true);
+        validate_points(&ring, 3, what)?;
+        merge_polygon(current, &ring, config.spacing)?
+    } else {
+        validate_points(points, 2, "detected polyline")?;
+        merge_polyline(current, points, config.smoothing, config.spacing)?
+    };
+    validate_points(&merged, if closed { 3 } else { 2 }, "merged geometry")?;
+    Ok(merged)
+}
+
 /// Points closer than this (metres) to the previous one are dropped before storing a crossing ring
 /// (this also removes a repeated closing point).
 const DEDUP_EPS: f64 = 1e-9;
@@ -332,24 +355,80 @@ impl GlobalMap {
         let inst = self.slots[slot as usize]
             .as_ref()
             .ok_or(GeomError::UnknownId(id))?;
-        let merged = if inst.closed {
-            let what = "detected crossing ring";
-            validate_points(points, 2, what)?;
-            let ring = dedup(points, DEDUP_EPS, true);
-            validate_points(&ring, 3, what)?;
-            merge_polygon(&inst.points, &ring, self.config.spacing)?
-        } else {
-            validate_points(points, 2, "detected polyline")?;
-            merge_polyline(
-                &inst.points,
-                points,
-                self.config.smoothing,
-                self.config.spacing,
-            )?
+        let merged = merge_rule(inst.closed, &inst.points, points, &self.config)?;
+        self.commit(slot, id, merged, 1, frame)
+    }
+
+    /// Merges many detections at `frame`: `items[i] = (id, points)`. The result is exactly that of
+    /// calling [`Self::merge`] on each item in order (items for the same instance are applied in
+    /// their order, each to the result of the previous one); the merges of different instances
+    /// are computed in parallel (rayon's pool) and then committed. Returns one result per item:
+    /// an item that fails (unknown id, bad geometry) leaves the instance as the items before it
+    /// made it, and does not affect the others.
+    pub fn merge_many(&mut self, items: &[(u64, &[Point])], frame: i64) -> Vec<Result<()>> {
+        use rayon::prelude::*;
+        let mut results: Vec<Result<()>> = (0..items.len()).map(|_| Ok(())).collect();
+        // Group the items by instance, in order of first appearance.
+        let mut group_of: HashMap<u64, usize> = HashMap::new();
+        let mut groups: Vec<(u32, Vec<usize>)> = Vec::new();
+        for (i, (id, _)) in items.iter().enumerate() {
+            match self.id_to_slot.get(id) {
+                None => results[i] = Err(GeomError::UnknownId(*id)),
+                Some(&slot) => {
+                    let g = *group_of.entry(*id).or_insert_with(|| {
+                        groups.push((slot, Vec::new()));
+                        groups.len() - 1
+                    });
+                    groups[g].1.push(i);
+                }
+            }
+        }
+        let config = &self.config;
+        let slots = &self.slots;
+        // Per group: the final geometry (None when every item failed) and the per-item errors.
+        type GroupOutcome = (Option<Vec<Point>>, u32, Vec<(usize, GeomError)>);
+        let outcome = |(slot, members): &(u32, Vec<usize>)| -> GroupOutcome {
+            let Some(inst) = slots[*slot as usize].as_ref() else {
+                let errs = members
+                    .iter()
+                    .map(|&i| (i, GeomError::UnknownId(items[i].0)))
+                    .collect();
+                return (None, 0, errs);
+            };
+            let mut current: Option<Vec<Point>> = None;
+            let mut merged = 0u32;
+            let mut errs = Vec::new();
+            for &i in members {
+                let base = current.as_deref().unwrap_or(&inst.points);
+                match merge_rule(inst.closed, base, items[i].1, config) {
+                    Ok(next) => {
+                        current = Some(next);
+                        merged += 1;
+                    }
+                    Err(e) => errs.push((i, e)),
+                }
+            }
+            (current, merged, errs)
         };
-        // Keep the store's invariants whatever the merge produced.
-        validate_points(&merged, if inst.closed { 3 } else { 2 }, "merged geometry")?;
-        self.commit(slot, id, merged, frame)
+        // Parallel only where there is enough work to share (a merge takes ~10 us).
+        let outcomes: Vec<GroupOutcome> = if groups.len() >= 4 {
+            groups.par_iter().map(outcome).collect()
+        } else {
+            groups.iter().map(outcome).collect()
+        };
+        for ((slot, members), (geometry, merged, errs)) in groups.iter().zip(outcomes) {
+            for (i, e) in errs {
+                results[i] = Err(e);
+            }
+            if let Some(points) = geometry {
+                let id = items[members[0]].0;
+                // (Cannot fail: the instance was present above and nothing removed it since.)
+                if let Err(e) = self.commit(*slot, id, points, merged, frame) {
+                    results[members[0]] = Err(e);
+                }
+            }
+        }
+        results
     }
 
     /// Replaces the geometry of instance `id` with `points` (resampled at `spacing` as on insert)
@@ -363,11 +442,18 @@ impl GlobalMap {
             .ok_or(GeomError::UnknownId(id))?
             .class;
         let stored = self.prepare(class, points)?;
-        self.commit(slot, id, stored, frame)
+        self.commit(slot, id, stored, 1, frame)
     }
 
-    /// Stores new geometry of the instance in `slot` as one more observation at `frame`.
-    fn commit(&mut self, slot: u32, id: u64, points: Vec<Point>, frame: i64) -> Result<()> {
+    /// Stores new geometry of the instance in `slot` as `observed` more observations at `frame`.
+    fn commit(
+        &mut self,
+        slot: u32,
+        id: u64,
+        points: Vec<Point>,
+        observed: u32,
+        frame: i64,
+    ) -> Result<()> {
         let aabb = points_aabb(&points);
         let inst = self.slots[slot as usize]
             .as_mut()
@@ -375,7 +461,7 @@ impl GlobalMap {
         inst.points = points;
         inst.first_frame = inst.first_frame.min(frame);
         inst.last_frame = inst.last_frame.max(frame);
-        inst.observations = inst.observations.saturating_add(1);
+        inst.observations = inst.observations.saturating_add(observed);
         self.index.upsert(slot, aabb);
         Ok(())
     }
@@ -610,6 +696,73 @@ mod tests {
 
     fn map() -> GlobalMap {
         GlobalMap::new(MapConfig::default()).unwrap()
+    }
+
+    /// `merge_many` gives exactly the map of sequential `merge` calls, with the same per-item
+    /// errors: several items per instance, unknown ids, bad geometry, both classes.
+    #[test]
+    fn merge_many_equals_sequential_merges() {
+        let mut a = map();
+        let mut ids = Vec::new();
+        for k in 0..12 {
+            let y = 10.0 * k as f64;
+            if k % 3 == 0 {
+                ids.push(
+                    a.insert(MapClass::PedCrossing, &square(0.0, y, 2.0), 0)
+                        .unwrap(),
+                );
+            } else {
+                let pts: Vec<Point> = (0..30)
+                    .map(|i| p(i as f64, y + 0.1 * (i as f64).sin()))
+                    .collect();
+                let class = if k % 2 == 0 {
+                    MapClass::Divider
+                } else {
+                    MapClass::Boundary
+                };
+                ids.push(a.insert(class, &pts, 0).unwrap());
+            }
+        }
+        let mut b = a.clone();
+        let mut items: Vec<(u64, Vec<Point>)> = Vec::new();
+        for (j, &id) in ids.iter().enumerate().chain(ids.iter().enumerate().take(5)) {
+            let y = 10.0 * j as f64;
+            let det = if j % 3 == 0 {
+                square(1.0, y + 0.3, 2.0)
+            } else {
+                (0..20)
+                    .map(|i| p(10.0 + i as f64, y + 0.2 + 0.05 * (i % 3) as f64))
+                    .collect()
+            };
+            items.push((id, det));
+        }
+        items.push((999, square(0.0, 0.0, 1.0))); // unknown id
+        items.push((ids[1], vec![p(f64::NAN, 0.0), p(1.0, 1.0)])); // non-finite
+        items.push((ids[2], vec![p(1.0, 1.0)])); // one point
+        items.push((ids[0], vec![p(0.0, 0.0), p(1.0, 1.0)])); // a ring of two points
+        items.push((ids[4], line(3.0, 40.0, 8.0, 40.5)));
+        let sequential: Vec<Result<()>> = items.iter().map(|(id, q)| a.merge(*id, q, 7)).collect();
+        let refs: Vec<(u64, &[Point])> = items.iter().map(|(id, q)| (*id, q.as_slice())).collect();
+        let batched = b.merge_many(&refs, 7);
+        assert_eq!(sequential.len(), batched.len());
+        for (i, (x, y)) in sequential.iter().zip(&batched).enumerate() {
+            assert_eq!(x.is_ok(), y.is_ok(), "item {i}: {x:?} vs {y:?}");
+            if let (Err(x), Err(y)) = (x, y) {
+                assert_eq!(x.to_string(), y.to_string());
+            }
+        }
+        assert!(batched.iter().filter(|r| r.is_err()).count() >= 4);
+        for &id in &ids {
+            let (x, y) = (a.get(id).unwrap(), b.get(id).unwrap());
+            assert_eq!(x.points, y.points, "instance {id}");
+            assert_eq!(x.observations, y.observations);
+            assert_eq!((x.first_frame, x.last_frame), (y.first_frame, y.last_frame));
+        }
+        // The index follows the merged geometry.
+        let patch = Patch::new(Pose2::new(15.0, 40.0, 0.0).unwrap(), 20.0, 60.0, 0.0).unwrap();
+        let hits = a.query(&patch);
+        assert!(!hits.is_empty());
+        assert_eq!(hits, b.query(&patch));
     }
 
     #[test]

@@ -32,7 +32,8 @@ fn id_arg(obj: &Bound<'_, PyAny>) -> PyResult<u64> {
     if let Ok(id) = obj.extract::<u64>() {
         return Ok(id);
     }
-    if obj.is_instance_of::<PyInt>() {
+    // Any other integer (negative or too large; Python or numpy): not an instance id.
+    if obj.is_instance_of::<PyInt>() || obj.extract::<i128>().is_ok() {
         return Err(PyKeyError::new_err(format!(
             "no instance with id {obj} in the map"
         )));
@@ -151,6 +152,58 @@ impl PyGlobalMap {
         let id = id_arg(id)?;
         let pts = points_arg(points, "points")?;
         py.detach(|| self.write()?.merge(id, &pts, frame).py_err())
+    }
+
+    /// Merges many detections at `frame` (`points[i]` into `ids[i]`): the same map as calling
+    /// `merge` for each in order, with the merges of different instances computed in parallel
+    /// and the GIL released. Returns, per item, None or the exception `merge` would have raised
+    /// (an item that fails does not affect the others). Argument errors (lengths, shapes,
+    /// dtypes) raise before anything is merged.
+    #[pyo3(signature = (ids, points, frame = 0))]
+    fn merge_many<'py>(
+        &self,
+        py: Python<'py>,
+        ids: &Bound<'py, PyAny>,
+        points: &Bound<'py, PyAny>,
+        frame: i64,
+    ) -> PyResult<Vec<Option<Bound<'py, PyAny>>>> {
+        // Per item: the id, or the KeyError of an int that cannot be an instance id.
+        let mut id_list: Vec<Result<u64, PyErr>> = Vec::new();
+        for item in ids
+            .try_iter()
+            .map_err(|_| PyTypeError::new_err("ids must be a sequence of ints (instance ids)"))?
+        {
+            let item = item?;
+            id_list.push(match id_arg(&item) {
+                Err(e) if !e.is_instance_of::<PyKeyError>(py) => return Err(e),
+                other => other,
+            });
+        }
+        let sets = crate::convert::point_sets_arg(points, "points")?;
+        if sets.len() != id_list.len() {
+            return Err(PyValueError::new_err(format!(
+                "ids and points must have the same length, got {} ids and {} point sets",
+                id_list.len(),
+                sets.len()
+            )));
+        }
+        // Ids that are not valid instance ids (negative ints) fail on their own, as `merge` would.
+        let items: Vec<(u64, &[geom::Point])> = id_list
+            .iter()
+            .zip(&sets)
+            .filter_map(|(id, pts)| id.as_ref().ok().map(|&id| (id, pts.as_slice())))
+            .collect();
+        let results = py.detach(|| Ok::<_, PyErr>(self.write()?.merge_many(&items, frame)))?;
+        let mut out: Vec<Option<Bound<'py, PyAny>>> = Vec::with_capacity(id_list.len());
+        let mut next = results.into_iter();
+        for id in id_list {
+            let err = match id {
+                Err(e) => Some(e),
+                Ok(_) => next.next().and_then(|r| r.err()).map(crate::errors::to_py),
+            };
+            out.push(err.map(|e| e.into_value(py).into_bound(py).into_any()));
+        }
+        Ok(out)
     }
 
     /// Replaces the geometry of instance `id` (world frame) as a new observation at `frame`,
