@@ -37,6 +37,9 @@ const DEDUP_EPS: f64 = 1e-9;
 /// so far are skipped by a triangle-inequality bound (a point of segment `j >= i` lies within
 /// `cum[j + 1] - cum[i]` of vertex `i`), starting from the previous query's segment, so that
 /// queries along the polyline cost about O(log m) segment tests instead of O(m).
+///
+/// Short polylines (at most [`ALL_SEGMENTS_MAX`] segments) test every segment instead, in a loop
+/// the compiler vectorises, with the same arithmetic and tie rule (so the same result).
 struct Projector<'a> {
     g: &'a [Point],
     cum: &'a [f64],
@@ -44,7 +47,12 @@ struct Projector<'a> {
     hint: usize,
     /// Absolute slack (metres) making the skip bound safe against rounding.
     slack: f64,
+    /// Per segment (short polylines only): start x, y, direction x, y, squared length.
+    soa: Option<[Vec<f64>; 5]>,
 }
+
+/// Polylines with at most this many segments are projected onto by testing every segment.
+const ALL_SEGMENTS_MAX: usize = 64;
 
 impl<'a> Projector<'a> {
     fn new(g: &'a [Point], cum: &'a [f64]) -> Self {
@@ -52,11 +60,26 @@ impl<'a> Projector<'a> {
             .iter()
             .map(|q| q.x.abs().max(q.y.abs()))
             .fold(cum[cum.len() - 1], f64::max);
+        let nseg = g.len() - 1;
+        let soa = (nseg <= ALL_SEGMENTS_MAX).then(|| {
+            let mut soa: [Vec<f64>; 5] = std::array::from_fn(|_| Vec::with_capacity(nseg));
+            for i in 0..nseg {
+                let d = g[i + 1] - g[i];
+                let len = cum[i + 1] - cum[i];
+                soa[0].push(g[i].x);
+                soa[1].push(g[i].y);
+                soa[2].push(d.x);
+                soa[3].push(d.y);
+                soa[4].push(len * len);
+            }
+            soa
+        });
         Projector {
             g,
             cum,
             hint: 0,
             slack: 1e-9 * (1.0 + scale),
+            soa,
         }
     }
 
@@ -83,13 +106,64 @@ impl<'a> Projector<'a> {
     }
 
     fn project(&mut self, p: &Point) -> (f64, Vector2<f64>) {
+        if self.soa.is_some() {
+            self.project_all(p)
+        } else {
+            self.project_scan(p)
+        }
+    }
+
+    /// Every segment tested: the squared distances in one vectorisable pass (the arithmetic of
+    /// [`Self::segment`]), then the first minimum.
+    fn project_all(&self, p: &Point) -> (f64, Vector2<f64>) {
+        let Some([gx, gy, dx, dy, len2]) = &self.soa else {
+            return self.project_scan_from(p, 0).0;
+        };
+        let nseg = gx.len();
+        let mut dist2 = [f64::INFINITY; ALL_SEGMENTS_MAX];
+        for i in 0..nseg {
+            let (ax, ay) = (p.x - gx[i], p.y - gy[i]);
+            let t_raw = (ax * dx[i] + ay * dy[i]) / len2[i];
+            let t = t_raw.clamp(0.0, 1.0);
+            let (ex, ey) = (p.x - (gx[i] + dx[i] * t), p.y - (gy[i] + dy[i] * t));
+            let d2 = ex * ex + ey * ey;
+            dist2[i] = if len2[i] > 0.0 { d2 } else { f64::INFINITY };
+        }
+        let mut best_i = usize::MAX;
+        let mut best = f64::INFINITY;
+        for (i, &d2) in dist2[..nseg].iter().enumerate() {
+            if d2 < best {
+                best = d2;
+                best_i = i;
+            }
+        }
+        match (best_i != usize::MAX)
+            .then(|| self.segment(best_i, p))
+            .flatten()
+        {
+            Some((_, s, tangent)) => (s, tangent),
+            None => (0.0, Vector2::new(1.0, 0.0)),
+        }
+    }
+
+    /// The skipping scan from the previous query's segment (long polylines).
+    fn project_scan(&mut self, p: &Point) -> (f64, Vector2<f64>) {
+        let hint = self.hint;
+        let (out, best_i) = self.project_scan_from(p, hint);
+        if let Some(i) = best_i {
+            self.hint = i;
+        }
+        out
+    }
+
+    fn project_scan_from(&self, p: &Point, hint: usize) -> ((f64, Vector2<f64>), Option<usize>) {
         let (g, cum) = (self.g, self.cum);
         let nseg = g.len() - 1;
         let mut best = (f64::INFINITY, 0.0, Vector2::new(1.0, 0.0));
         let mut best_i = usize::MAX;
-        if let Some(c) = self.segment(self.hint.min(nseg - 1), p) {
+        if let Some(c) = self.segment(hint.min(nseg - 1), p) {
             best = c;
-            best_i = self.hint.min(nseg - 1);
+            best_i = hint.min(nseg - 1);
         }
         let mut i = 0;
         while i < nseg {
@@ -119,10 +193,7 @@ impl<'a> Projector<'a> {
             }
             i += 1;
         }
-        if best_i != usize::MAX {
-            self.hint = best_i;
-        }
-        (best.1, best.2)
+        ((best.1, best.2), (best_i != usize::MAX).then_some(best_i))
     }
 }
 
@@ -483,7 +554,11 @@ mod tests {
             let mut pr = Projector::new(&g, &cum);
             for &(x, y) in &q {
                 let pt = p(snap(x), snap(y));
-                prop_assert_eq!(pr.project(&pt), project_brute(&g, &cum, &pt));
+                let want = project_brute(&g, &cum, &pt);
+                // Both strategies: every segment (short polylines) and the skipping scan.
+                prop_assert_eq!(pr.project_all(&pt), want);
+                prop_assert_eq!(pr.project_scan(&pt), want);
+                prop_assert_eq!(pr.project(&pt), want);
             }
         }
 

@@ -709,6 +709,12 @@ class Mapper:
             )[-1]  # (m, P, 2) metres
         return out.cpu().numpy().astype(np.float32)
 
+    def _note_failure(self, frame_index: int, target: int, exc: BaseException) -> None:
+        """Counts a rejected insert or merge (degenerate geometry) and keeps the first 20."""
+        self.stats.merge_failures += 1
+        if len(self.stats.failures) < 20:
+            self.stats.failures.append(f"frame {frame_index}, id {target}: {exc}")
+
     def _merge(
         self,
         det: Detections,
@@ -719,24 +725,34 @@ class Mapper:
     ) -> tuple[list[int], list[int]]:
         inserted: list[int] = []
         merged: list[int] = []
+        # Inserts now (a later detection of this frame may merge into a new instance), merges
+        # collected and run in one parallel merge_many call: the same map as merging in order.
+        merge_items: list[tuple[int, int, NDArray[np.float64]]] = []  # (track, target, world)
         for j, tid in enumerate(track_ids.tolist()):
             world = ego_to_world(fused[j], pose)  # (P, 2)
             target = self._alias.get(tid, tid)  # the global instance this track maps into
-            try:
-                if target in self._map:
-                    self._map.merge(target, world, frame=frame_index)
-                    merged.append(target)
-                elif self.tracker.track(tid).hits < self.config.min_hits:
-                    pass  # tentative track: not in the map until confirmed
-                else:
-                    self._map.insert_with_id(tid, int(det.classes[j]), world, frame=frame_index)
-                    inserted.append(tid)
-            except ValueError as exc:  # degenerate geometry (e.g. a collapsed detection)
-                self.stats.merge_failures += 1
-                if len(self.stats.failures) < 20:
-                    self.stats.failures.append(f"frame {frame_index}, id {target}: {exc}")
+            if target in self._map:
+                merge_items.append((tid, target, world))
                 continue
+            if self.tracker.track(tid).hits < self.config.min_hits:
+                continue  # tentative track: not in the map until confirmed
+            try:
+                self._map.insert_with_id(tid, int(det.classes[j]), world, frame=frame_index)
+            except ValueError as exc:  # degenerate geometry (e.g. a collapsed detection)
+                self._note_failure(frame_index, target, exc)
+                continue
+            inserted.append(tid)
             self.tracker.set_points(tid, world)
+        if merge_items:
+            errors = self._map.merge_many(
+                [t for _, t, _ in merge_items], [w for _, _, w in merge_items], frame=frame_index
+            )
+            for (tid, target, world), exc in zip(merge_items, errors, strict=True):
+                if exc is not None:
+                    self._note_failure(frame_index, target, exc)
+                    continue
+                merged.append(target)
+                self.tracker.set_points(tid, world)
         self.stats.inserted += len(inserted)
         self.stats.merged += len(merged)
         return inserted, merged
