@@ -337,6 +337,284 @@ mod tests {
         ));
     }
 
+    /// A tiny deterministic generator (splitmix64) for test shapes.
+    struct Rng(u64);
+
+    impl Rng {
+        fn next(&mut self) -> f64 {
+            self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+            let mut z = self.0;
+            z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+            z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+            ((z ^ (z >> 31)) >> 11) as f64 / (1u64 << 53) as f64
+        }
+        fn uniform(&mut self, lo: f64, hi: f64) -> f64 {
+            lo + (hi - lo) * self.next()
+        }
+        fn normal(&mut self, sigma: f64) -> f64 {
+            let u = self.next().max(1e-300);
+            sigma * (-2.0 * u.ln()).sqrt() * (std::f64::consts::TAU * self.next()).cos()
+        }
+    }
+
+    /// Global ring of one of three kinds: an axis-parallel rectangle with integer corners sampled
+    /// every 1 m (as stored crossings start out), a rotated rectangle, or a star-shaped
+    /// (non-convex) polygon; all simple and counter-clockwise.
+    fn global_ring(kind: u8, rng: &mut Rng) -> Vec<Point> {
+        let (cx, cy) = (rng.uniform(-500.0, 500.0), rng.uniform(-500.0, 500.0));
+        match kind % 3 {
+            0 => {
+                let (x0, y0) = (cx.round(), cy.round());
+                let (w, h) = (
+                    rng.uniform(2.0, 15.0).round(),
+                    rng.uniform(2.0, 15.0).round(),
+                );
+                let r = rect(x0, y0, x0 + w, y0 + h);
+                crate::resample::resample_spacing(&r, 1.0, true).unwrap()
+            }
+            1 => {
+                let (w, h, a) = (
+                    rng.uniform(2.0, 15.0),
+                    rng.uniform(2.0, 6.0),
+                    rng.uniform(0.0, 3.2),
+                );
+                let (c, s) = (a.cos(), a.sin());
+                let r: Vec<Point> = rect(-w / 2.0, -h / 2.0, w / 2.0, h / 2.0)
+                    .iter()
+                    .map(|q| p(cx + c * q.x - s * q.y, cy + s * q.x + c * q.y))
+                    .collect();
+                crate::resample::resample_spacing(&r, 1.0, true).unwrap()
+            }
+            _ => {
+                let k = 5 + (rng.next() * 30.0) as usize;
+                let big = rng.uniform(3.0, 10.0);
+                (0..k)
+                    .map(|i| {
+                        let t =
+                            (i as f64 + rng.uniform(0.0, 0.8)) / k as f64 * std::f64::consts::TAU;
+                        let r = rng.uniform(0.4 * big, big);
+                        p(cx + r * t.cos(), cy + r * t.sin())
+                    })
+                    .collect()
+            }
+        }
+    }
+
+    /// A detection of `g`: `g` scaled by `scale` towards a random point near it, shifted by
+    /// `shift`, resampled to 20 points, with N(0, `noise`) noise.
+    fn detection(g: &[Point], rng: &mut Rng, scale: f64, shift: f64, noise: f64) -> Vec<Point> {
+        let n = g.len() as f64;
+        let c = g
+            .iter()
+            .fold(p(0.0, 0.0), |a, q| p(a.x + q.x / n, a.y + q.y / n));
+        let (fx, fy) = (c.x + rng.normal(2.0), c.y + rng.normal(2.0));
+        let moved: Vec<Point> = g
+            .iter()
+            .map(|q| {
+                p(
+                    fx + (q.x - fx) * scale + shift,
+                    fy + (q.y - fy) * scale + shift,
+                )
+            })
+            .collect();
+        crate::resample::resample(&moved, 20, true)
+            .unwrap()
+            .into_iter()
+            .map(|q| p(q.x + rng.normal(noise), q.y + rng.normal(noise)))
+            .collect()
+    }
+
+    /// Checks the fast path against the overlay when it is taken: same number of rings, each
+    /// ring's area equal to 1e-9 relative or to the overlay's grid rounding (perimeter times
+    /// i_overlay's grid step), and the same ring once resampled at 1 m (start included), up to the
+    /// grid rounding amplified at shallow crossings. Returns whether the fast path was taken.
+    fn check_fast_vs_overlay(a: &[Point], b: &[Point]) -> bool {
+        let slow = overlay_union(&[a.to_vec(), b.to_vec()]);
+        let Some(fast) = crate::union_fast::union_two_simple(a, b) else {
+            return false;
+        };
+        assert_eq!(fast.len(), slow.len(), "ring count");
+        let ext = a.iter().chain(b).fold(
+            [
+                f64::INFINITY,
+                f64::NEG_INFINITY,
+                f64::INFINITY,
+                f64::NEG_INFINITY,
+            ],
+            |e, q| [e[0].min(q.x), e[1].max(q.x), e[2].min(q.y), e[3].max(q.y)],
+        );
+        let grid = (ext[1] - ext[0]).max(ext[3] - ext[2]) * 2f64.powi(-29);
+        for (f, s) in fast.iter().zip(&slow) {
+            let (af, as_) = (area(f), area(s));
+            let perim = crate::resample::polyline_length(s, true);
+            assert!(af > 0.0, "ccw");
+            assert!(
+                (af - as_).abs() <= (1e-9 * as_).max(perim * grid),
+                "area fast {af} overlay {as_}"
+            );
+            let rf = crate::resample::resample_spacing(f, 1.0, true).unwrap();
+            let rs = crate::resample::resample_spacing(s, 1.0, true).unwrap();
+            let pf = crate::resample::polyline_length(f, true);
+            assert!(
+                (pf - perim).abs() < 1e-6,
+                "perimeter fast {pf} overlay {perim}"
+            );
+            if rf.len() != rs.len() {
+                // ceil(perimeter / spacing) on a whole number of metres (a contained integer
+                // rectangle): rounding decides the count either way.
+                assert!((perim - perim.round()).abs() < 1e-6, "resampled count");
+                continue;
+            }
+            for (x, y) in rf.iter().zip(&rs) {
+                assert!((x - y).norm() < 1e-4, "resampled {x:?} vs {y:?}");
+            }
+        }
+        true
+    }
+
+    #[test]
+    fn fast_path_matches_overlay_on_rectangles() {
+        let (a, b) = (rect(0.0, 0.0, 2.0, 1.0), rect(1.0, -0.5, 3.0, 0.5));
+        assert!(check_fast_vs_overlay(&a, &b));
+        let u = polygon_union(&[a, b]).unwrap();
+        assert_eq!(u.len(), 1);
+        assert!((area(&u[0]) - 3.5).abs() < 1e-12);
+        // Lowest-left vertex (0, 0) second: the overlay's contours start at its predecessor.
+        assert_eq!(u[0][1], p(0.0, 0.0));
+        assert_eq!(u[0][0], p(0.0, 1.0));
+        // Containment and disjoint rings.
+        assert!(check_fast_vs_overlay(
+            &rect(0.0, 0.0, 4.0, 4.0),
+            &rect(1.0, 1.0, 2.0, 2.0)
+        ));
+        assert!(check_fast_vs_overlay(
+            &rect(1.0, 1.0, 2.0, 2.0),
+            &rect(0.0, 0.0, 4.0, 4.0)
+        ));
+        assert!(check_fast_vs_overlay(
+            &rect(0.0, 0.0, 1.0, 1.0),
+            &rect(5.0, 0.0, 8.0, 2.0)
+        ));
+        // A cross: the union has a concave outline.
+        assert!(check_fast_vs_overlay(
+            &rect(0.0, 1.0, 3.0, 2.0),
+            &rect(1.0, 0.0, 2.0, 3.0)
+        ));
+        // A ring around a hole: an annulus-like union whose hole is dropped.
+        let c = vec![
+            p(0.0, 0.0),
+            p(6.0, 0.0),
+            p(6.0, 6.0),
+            p(0.0, 6.0),
+            p(0.0, 4.0),
+            p(4.0, 4.0),
+            p(4.0, 2.0),
+            p(0.0, 2.0),
+        ];
+        let bar = rect(-1.0, 1.0, 2.0, 5.0);
+        assert!(check_fast_vs_overlay(&c, &bar));
+        let u = polygon_union(&[c, bar]).unwrap();
+        assert_eq!(u.len(), 1);
+        // Outline [-1, 6] x [0, 6] less the corners left of x = 0 (4 + 36); the 2 x 2 hole dropped.
+        assert!((area(&u[0]) - 40.0).abs() < 1e-9);
+    }
+
+    /// Crossing-like merges (noisy partial copies overlapping the global ring): the fast path is
+    /// the common case and agrees with the overlay (so the checks above are not vacuous).
+    #[test]
+    fn fast_path_is_common_on_crossing_merges() {
+        let mut taken = 0;
+        let total = 300;
+        for seed in 0..total {
+            let mut rng = Rng(seed);
+            let g = global_ring((seed % 3) as u8, &mut rng);
+            let scale = rng.uniform(0.5, 1.1);
+            let shift = rng.uniform(-1.0, 1.0);
+            let d = detection(&g, &mut rng, scale, shift, 0.1);
+            taken += check_fast_vs_overlay(&g, &d) as usize;
+        }
+        assert!(
+            taken * 10 >= total as usize * 7,
+            "fast path taken {taken} / {total}"
+        );
+    }
+
+    /// Degenerate and touching inputs are not the fast path's business: it declines them, and
+    /// the overlay still gives the right union.
+    #[test]
+    fn degenerate_inputs_take_the_fallback() {
+        let a = rect(0.0, 0.0, 2.0, 1.0);
+        let cases: Vec<(Vec<Point>, f64)> = vec![
+            (a.clone(), 2.0),                                   // identical
+            (rect(2.0, 0.0, 3.0, 1.0), 3.0),                    // shared edge
+            (rect(1.0, 0.0, 3.0, 1.0), 3.0),                    // collinear overlapping edges
+            (rect(2.0, 1.0, 3.0, 2.0), 3.0),                    // touching corners
+            (vec![p(1.0, 1.0), p(1.5, 2.0), p(0.5, 2.0)], 2.5), // vertex on an edge
+            (
+                vec![p(0.0, 0.0), p(1.0, 1.0), p(1.0, 0.0), p(0.0, 1.0)],
+                2.0,
+            ), // bowtie inside
+            (vec![p(5.0, 5.0), p(6.0, 5.0), p(7.0, 5.0)], 2.0), // zero area
+            (
+                vec![
+                    p(3.0, 0.0),
+                    p(4.0, 0.0),
+                    p(4.0, 1.0),
+                    p(3.0, 1.0),
+                    p(3.5, 0.5),
+                    p(3.5, 0.5 + 1e-12),
+                ],
+                2.75,
+            ), // a tiny edge
+        ];
+        for (b, want) in cases {
+            assert!(
+                crate::union_fast::union_two_simple(&a, &b).is_none(),
+                "fast path must decline {b:?}"
+            );
+            let u = polygon_union(&[a.clone(), b.clone()]).unwrap();
+            let total: f64 = u.iter().map(|r| area(r)).sum();
+            assert!(
+                (total - want).abs() < 1e-6,
+                "{b:?}: area {total} want {want}"
+            );
+            assert!(u.iter().all(|r| area(r) > 0.0));
+        }
+    }
+
+    /// The fast path on a self-crossing ring declines too (the overlay resolves it).
+    #[test]
+    fn self_crossing_detection_falls_back() {
+        let g = rect(0.0, 0.0, 4.0, 2.0);
+        let d = vec![p(1.0, -1.0), p(3.0, 3.0), p(3.0, -1.0), p(1.0, 3.0)];
+        assert!(crate::union_fast::union_two_simple(&g, &d).is_none());
+        let u = polygon_union(&[g, d]).unwrap();
+        assert_eq!(u.len(), 1);
+        assert!(area(&u[0]) > 8.0);
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(400))]
+
+        /// Random crossings-like inputs: the fast path, when taken, agrees with the overlay;
+        /// containment (scale < 1, no shift), disjoint (large shift) and partial overlaps occur.
+        #[test]
+        fn prop_fast_path_agrees_with_overlay(seed in any::<u64>(), kind in 0u8..3,
+                                              scale in 0.2f64..1.3, shift in prop_oneof![Just(0.0), -3.0f64..3.0, 20.0f64..30.0],
+                                              noise in prop_oneof![Just(0.0), 0.01f64..0.2]) {
+            let mut rng = Rng(seed);
+            let g = global_ring(kind, &mut rng);
+            let d = detection(&g, &mut rng, scale, shift, noise);
+            check_fast_vs_overlay(&g, &d);
+            check_fast_vs_overlay(&d, &g);
+            // Also with the detection reversed (clockwise) and the global ring itself.
+            let mut rev = d.clone();
+            rev.reverse();
+            check_fast_vs_overlay(&g, &rev);
+            prop_assert!(crate::union_fast::union_two_simple(&g, &g).is_none());
+        }
+    }
+
     proptest! {
         #[test]
         fn prop_union_area_bounds(a in prop::collection::vec((-10.0f64..10.0, -10.0f64..10.0), 3..8),

@@ -79,10 +79,14 @@ impl V {
 
 /// Twice the signed area of a ring.
 fn area2(r: &[V]) -> f64 {
-    let n = r.len();
+    let Some(&last) = r.last() else {
+        return 0.0;
+    };
     let mut s = 0.0;
-    for i in 0..n {
-        s += r[i].cross(r[(i + 1) % n]);
+    let mut prev = last;
+    for &p in r {
+        s += prev.cross(p);
+        prev = p;
     }
     s
 }
@@ -115,11 +119,18 @@ fn inside(p: V, r: &[V]) -> bool {
     c
 }
 
-/// One edge of the sweep: ring (0 or 1), index of its first vertex, bounding box grown by tol.
+/// One edge of the sweep: ring (0 or 1), index of its first vertex, bounding box grown by tol
+/// (`x` along the sweep axis, `y` across it).
 #[derive(Clone, Copy)]
 struct Edge {
     ring: u8,
     i: u32,
+    /// Index of the next edge's first vertex in the same ring.
+    next: u32,
+    p: V,
+    q: V,
+    /// Length of the edge.
+    len: f64,
     x0: f64,
     x1: f64,
     y0: f64,
@@ -134,6 +145,8 @@ struct Cross {
     eb: u32,
     tb: f64,
     p: V,
+    /// The crossing in the caller's coordinates.
+    pw: Point,
     /// Ring 0 leaves ring 1 here (so ring 1 enters ring 0).
     a_exits: bool,
 }
@@ -207,12 +220,17 @@ pub(crate) fn union_two_simple(a: &[Point], b: &[Point]) -> Option<Vec<Vec<Point
     };
     let rings: [&[V]; 2] = [&ra, &rb];
 
-    // Edges, no edge shorter than tol.
+    // Edges, no edge shorter than tol. The sweep runs along the longer side of the bounding box
+    // (a crossing is long and thin: across it, every edge would overlap every other one).
+    let along_x = x1 - x0 >= y1 - y0;
+    let sweep = |p: V| if along_x { p.x } else { p.y };
+    let across = |p: V| if along_x { p.y } else { p.x };
     let mut edges: Vec<Edge> = Vec::with_capacity(n + m);
     for (ring, r) in rings.iter().enumerate() {
         let k = r.len();
         for i in 0..k {
-            let (p, q) = (r[i], r[(i + 1) % k]);
+            let next = if i + 1 == k { 0 } else { i + 1 };
+            let (p, q) = (r[i], r[next]);
             let d = q.sub(p);
             if d.dot(d) < tol2 {
                 return None;
@@ -220,20 +238,18 @@ pub(crate) fn union_two_simple(a: &[Point], b: &[Point]) -> Option<Vec<Vec<Point
             edges.push(Edge {
                 ring: ring as u8,
                 i: i as u32,
-                x0: p.x.min(q.x) - tol,
-                x1: p.x.max(q.x) + tol,
-                y0: p.y.min(q.y) - tol,
-                y1: p.y.max(q.y) + tol,
+                next: next as u32,
+                p,
+                q,
+                len: d.dot(d).sqrt(),
+                x0: sweep(p).min(sweep(q)) - tol,
+                x1: sweep(p).max(sweep(q)) + tol,
+                y0: across(p).min(across(q)) - tol,
+                y1: across(p).max(across(q)) + tol,
             });
         }
     }
     edges.sort_unstable_by(|e, f| e.x0.total_cmp(&f.x0));
-
-    let seg = |ring: u8, i: u32| -> (V, V) {
-        let r = rings[ring as usize];
-        let i = i as usize;
-        (r[i], r[(i + 1) % r.len()])
-    };
 
     let mut crosses: Vec<Cross> = Vec::new();
     for (k, e) in edges.iter().enumerate() {
@@ -244,53 +260,40 @@ pub(crate) fn union_two_simple(a: &[Point], b: &[Point]) -> Option<Vec<Vec<Point
             if f.y0 > e.y1 || e.y0 > f.y1 {
                 continue;
             }
-            let (p1, p2) = seg(e.ring, e.i);
-            let (q1, q2) = seg(f.ring, f.i);
-            if e.ring == f.ring {
-                let len = rings[e.ring as usize].len() as u32;
-                let (i, j) = (e.i, f.i);
-                if (i + 1) % len == j || (j + 1) % len == i {
-                    // Neighbours: the far ends must not come back near the other edge (spike).
-                    let (p, v, q) = if (i + 1) % len == j {
-                        (p1, p2, q2)
-                    } else {
-                        (q1, q2, p2)
-                    };
-                    if near(q, p, v, tol2) || near(p, v, q, tol2) {
-                        return None;
-                    }
-                    // A triangle has every pair adjacent both ways: the test above covers both.
-                    continue;
-                }
-                if near(p1, q1, q2, tol2)
-                    || near(p2, q1, q2, tol2)
-                    || near(q1, p1, p2, tol2)
-                    || near(q2, p1, p2, tol2)
-                {
+            let (p1, p2, q1, q2) = (e.p, e.q, f.p, f.q);
+            if e.ring == f.ring && (e.next == f.i || f.next == e.i) {
+                // Neighbours: the far ends must not come back near the other edge (spike). A
+                // triangle has every pair adjacent both ways: this test covers both.
+                let (p, v, q) = if e.next == f.i {
+                    (p1, p2, q2)
+                } else {
+                    (q1, q2, p2)
+                };
+                if near(q, p, v, tol2) || near(p, v, q, tol2) {
                     return None;
-                }
-                let d1 = q2.sub(q1).cross(p1.sub(q1));
-                let d2 = q2.sub(q1).cross(p2.sub(q1));
-                let d3 = p2.sub(p1).cross(q1.sub(p1));
-                let d4 = p2.sub(p1).cross(q2.sub(p1));
-                if (d1 > 0.0) != (d2 > 0.0) && (d3 > 0.0) != (d4 > 0.0) {
-                    return None; // self-crossing ring
                 }
                 continue;
             }
-            if near(p1, q1, q2, tol2)
-                || near(p2, q1, q2, tol2)
-                || near(q1, p1, p2, tol2)
-                || near(q2, p1, p2, tol2)
+            let (dp, dq) = (p2.sub(p1), q2.sub(q1));
+            let d1 = dq.cross(p1.sub(q1));
+            let d2 = dq.cross(p2.sub(q1));
+            let d3 = dp.cross(q1.sub(p1));
+            let d4 = dp.cross(q2.sub(p1));
+            // |d1| / |q| is p1's distance to q's line, which bounds its distance to q from below:
+            // only endpoints near the other edge's line need the exact segment distance.
+            let (lq, lp) = (tol * f.len, tol * e.len);
+            if (d1.abs() < lq && near(p1, q1, q2, tol2))
+                || (d2.abs() < lq && near(p2, q1, q2, tol2))
+                || (d3.abs() < lp && near(q1, p1, p2, tol2))
+                || (d4.abs() < lp && near(q2, p1, p2, tol2))
             {
                 return None;
             }
-            let d1 = q2.sub(q1).cross(p1.sub(q1));
-            let d2 = q2.sub(q1).cross(p2.sub(q1));
-            let d3 = p2.sub(p1).cross(q1.sub(p1));
-            let d4 = p2.sub(p1).cross(q2.sub(p1));
             if !((d1 > 0.0) != (d2 > 0.0) && (d3 > 0.0) != (d4 > 0.0)) {
                 continue;
+            }
+            if e.ring == f.ring {
+                return None; // self-crossing ring
             }
             // All four are well away from zero here (each endpoint is >= tol from the other
             // segment and the crossing is proper), so both denominators are non-zero.
@@ -318,15 +321,37 @@ pub(crate) fn union_two_simple(a: &[Point], b: &[Point]) -> Option<Vec<Vec<Point
             if !(ta > 0.0 && ta < 1.0 && tb > 0.0 && tb < 1.0) {
                 return None;
             }
+            let p = V {
+                x: pa.x + da.x * ta,
+                y: pa.y + da.y * ta,
+            };
+            // On an axis-parallel edge the crossing keeps that edge's exact coordinate (i_overlay
+            // keeps it too: the edge lies on a grid line), so that runs along axis-parallel edges
+            // and lowest-left ties are seen as i_overlay sees them.
+            let (wa, wb) = (orig(0, ea as usize), orig(1, eb as usize));
+            let pw = Point::new(
+                if da.x == 0.0 {
+                    wa.x
+                } else if db.x == 0.0 {
+                    wb.x
+                } else {
+                    p.x + origin.x
+                },
+                if da.y == 0.0 {
+                    wa.y
+                } else if db.y == 0.0 {
+                    wb.y
+                } else {
+                    p.y + origin.y
+                },
+            );
             crosses.push(Cross {
                 ea,
                 ta,
                 eb,
                 tb,
-                p: V {
-                    x: pa.x + da.x * ta,
-                    y: pa.y + da.y * ta,
-                },
+                p,
+                pw,
                 a_exits: da.cross(db) > 0.0,
             });
         }
@@ -380,8 +405,9 @@ pub(crate) fn union_two_simple(a: &[Point], b: &[Point]) -> Option<Vec<Vec<Point
                     break;
                 }
                 if let Some(lt) = last_t {
-                    let (p, q) = (r[i as usize], r[(i as usize + 1) % r.len()]);
-                    let d = q.sub(p);
+                    let iu = i as usize;
+                    let q = if iu + 1 == r.len() { r[0] } else { r[iu + 1] };
+                    let d = q.sub(r[iu]);
                     if (t - lt) * (t - lt) * d.dot(d) < tol2 {
                         return None;
                     }
@@ -413,22 +439,26 @@ pub(crate) fn union_two_simple(a: &[Point], b: &[Point]) -> Option<Vec<Vec<Point
 
     // Trace the loops.
     let mut visited = vec![false; crosses.len()];
-    let mut outer: Option<Vec<Point>> = None;
+    let mut outer: Option<(f64, Vec<Point>)> = None;
     let mut holes_area2 = 0.0;
     let max_steps = nodes_a.len() + nodes_b.len() + 1;
     for start in 0..crosses.len() {
         if visited[start] {
             continue;
         }
-        let mut ring_pts: Vec<Point> = Vec::new();
-        let mut local: Vec<V> = Vec::new();
+        let mut ring_pts: Vec<Point> = Vec::with_capacity(max_steps);
+        // Twice the signed area by the shoelace formula, in the local frame.
+        let first = crosses[start].p;
+        let mut prev = first;
+        let mut a2 = 0.0;
         let mut c = start;
         let mut steps = 0usize;
         loop {
             visited[c] = true;
             let cr = crosses[c];
-            local.push(cr.p);
-            ring_pts.push(Point::new(cr.p.x + origin.x, cr.p.y + origin.y));
+            a2 += prev.cross(cr.p);
+            prev = cr.p;
+            ring_pts.push(cr.pw);
             // Continue along the ring that leaves the other one here.
             let ring: u8 = if cr.a_exits { 0 } else { 1 };
             let (nodes, pos) = if ring == 0 {
@@ -438,14 +468,16 @@ pub(crate) fn union_two_simple(a: &[Point], b: &[Point]) -> Option<Vec<Vec<Point
             };
             let mut k = pos[c] as usize;
             let next = loop {
-                k = (k + 1) % nodes.len();
+                k = if k + 1 == nodes.len() { 0 } else { k + 1 };
                 steps += 1;
                 if steps > max_steps {
                     return None;
                 }
                 match nodes[k] {
                     Node::Vertex(i) => {
-                        local.push(rings[ring as usize][i as usize]);
+                        let v = rings[ring as usize][i as usize];
+                        a2 += prev.cross(v);
+                        prev = v;
                         ring_pts.push(orig(ring, i as usize));
                     }
                     Node::Cross(j) => break j as usize,
@@ -460,18 +492,17 @@ pub(crate) fn union_two_simple(a: &[Point], b: &[Point]) -> Option<Vec<Vec<Point
             }
             c = next;
         }
-        let a2 = area2(&local);
+        a2 += prev.cross(first);
         if a2 > 0.0 {
             if outer.is_some() {
                 return None;
             }
-            outer = Some(ring_pts);
+            outer = Some((a2, ring_pts));
         } else {
             holes_area2 += a2;
         }
     }
-    let outer = outer?;
-    let outer_area2 = area2(&outer.iter().map(to_local).collect::<Vec<_>>());
+    let (outer_area2, outer) = outer?;
     let union2 = outer_area2 + holes_area2;
     let slack = 2.0 * tol * extent;
     if !(union2 >= area_a.max(area_b) - slack && union2 <= area_a + area_b + slack) {
@@ -489,7 +520,9 @@ fn finish_ring(ring: Vec<Point>) -> Option<Vec<Point>> {
     let n = ring.len();
     let mut kept: Vec<Point> = Vec::with_capacity(n);
     for i in 0..n {
-        let (p, c, q) = (ring[(i + n - 1) % n], ring[i], ring[(i + 1) % n]);
+        let p = if i == 0 { ring[n - 1] } else { ring[i - 1] };
+        let q = if i + 1 == n { ring[0] } else { ring[i + 1] };
+        let c = ring[i];
         // Only axis-parallel runs are dropped: they stay collinear on i_overlay's grid. Other
         // nearly collinear vertices may or may not be dropped there, which moves no boundary.
         let on_x_line = p.x == c.x && c.x == q.x;
