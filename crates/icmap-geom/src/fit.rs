@@ -343,20 +343,15 @@ fn lsq_fit_cubic_polynomial(x: &[[f64; 2]], des: &Design) -> Option<LsqFit> {
     let mut r = [[0.0f64; 4]; 4];
     let scale = (0..4).map(|i| a[i][i]).fold(0.0, f64::max);
     for i in 0..4 {
-        let mut d = a[i][i];
-        for q in 0..i {
-            d -= r[q][i] * r[q][i];
-        }
-        if !(d > 1e-12 * scale) {
+        let d = a[i][i] - r[..i].iter().map(|row| row[i] * row[i]).sum::<f64>();
+        // (A NaN pivot fails too.)
+        if d.is_nan() || d <= 1e-12 * scale {
             return None;
         }
         let rii = d.sqrt();
         r[i][i] = rii;
         for j in i + 1..4 {
-            let mut e = a[i][j];
-            for q in 0..i {
-                e -= r[q][i] * r[q][j];
-            }
+            let e = a[i][j] - r[..i].iter().map(|row| row[i] * row[j]).sum::<f64>();
             r[i][j] = e / rii;
         }
     }
@@ -394,9 +389,7 @@ fn lsq_fit_cubic_polynomial(x: &[[f64; 2]], des: &Design) -> Option<LsqFit> {
     let rows: Vec<[f64; 5]> = (0..4)
         .map(|i| {
             let mut row = [0.0; 5];
-            for j in i..4 {
-                row[j - i] = r[i][j];
-            }
+            row[..4 - i].copy_from_slice(&r[i][i..]);
             row
         })
         .collect();
