@@ -318,66 +318,74 @@ fn lsq_fit_of_degree<const K: usize>(t: &[f64], x: &[[f64; 2]], des: &Design) ->
     LsqFit { r, z, c, fp }
 }
 
-/// [`lsq_fit`] for the cubic without interior knots (FITPACK's first iteration, and the accepted
-/// fit of most merges) by the normal equations: the 4 x 4 Gram matrix of the Bernstein basis is
-/// well conditioned for data spread over `[0, 1]`, so its Cholesky factor is the QR's `R` (positive
-/// diagonal) to rounding, at a fraction of the cost of one Givens rotation per basis value. The
-/// data are centred on their first point (B-splines sum to 1, so the fit shifts with the data) and
-/// `fp` is summed from the explicit residuals. `None` when the Gram matrix is not numerically
-/// positive definite (the caller falls back to Givens).
-fn lsq_fit_cubic_polynomial(x: &[[f64; 2]], des: &Design) -> Option<LsqFit> {
+/// Smallest accepted ratio of a Cholesky pivot to its diagonal entry of the Gram matrix in
+/// [`lsq_fit_cubic_normal`]; below it the system is too ill-conditioned for the normal equations
+/// (their error grows with the square of the condition number) and Givens takes over.
+const NORMAL_PIVOT_MIN: f64 = 1e-6;
+
+/// [`lsq_fit`] for cubic splines by the normal equations: the banded Gram matrix `B^T B`
+/// (bandwidth 4) and its Cholesky factor, which is the QR's `R` (positive diagonal) up to
+/// rounding, at a fraction of the cost of one Givens rotation per basis value. B-spline bases are
+/// well conditioned where every knot interval holds data; a pivot below [`NORMAL_PIVOT_MIN`] of its
+/// diagonal entry (an ill-posed knot placement) returns `None` and the caller uses Givens. The data
+/// are centred on their first point (B-splines sum to 1, so the fit shifts with the data) and `fp`
+/// is summed from the explicit residuals; `z` is returned for the uncentred data, as Givens gives
+/// it (`Q^T x`).
+fn lsq_fit_cubic_normal(t: &[f64], x: &[[f64; 2]], des: &Design) -> Option<LsqFit> {
+    const K1: usize = 4;
+    let nk1 = t.len() - K1;
     let origin = x[0];
-    let mut a = [[0.0f64; 4]; 4];
-    let mut rhs = [[0.0f64; 4]; 2];
-    for (h, xy) in des.basis.iter().zip(x) {
+    // Band storage: a[i][j] = A(i, i + j).
+    let mut a = vec![[0.0f64; 5]; nk1];
+    let mut rhs = [vec![0.0f64; nk1], vec![0.0f64; nk1]];
+    for ((h, xy), &l) in des.basis.iter().zip(x).zip(&des.interval) {
+        let j0 = l - 3;
         let v = [xy[0] - origin[0], xy[1] - origin[1]];
-        for i in 0..4 {
-            for j in i..4 {
-                a[i][j] += h[i] * h[j];
+        for i in 0..K1 {
+            let row = &mut a[j0 + i];
+            for j in i..K1 {
+                row[j - i] += h[i] * h[j];
             }
-            rhs[0][i] += h[i] * v[0];
-            rhs[1][i] += h[i] * v[1];
+            rhs[0][j0 + i] += h[i] * v[0];
+            rhs[1][j0 + i] += h[i] * v[1];
         }
     }
-    // Cholesky A = R^T R (R upper triangular).
-    let mut r = [[0.0f64; 4]; 4];
-    let scale = (0..4).map(|i| a[i][i]).fold(0.0, f64::max);
-    for i in 0..4 {
-        let d = a[i][i] - r[..i].iter().map(|row| row[i] * row[i]).sum::<f64>();
+    // Banded Cholesky A = R^T R; r[i][j] = R(i, i + j).
+    let mut r = vec![[0.0f64; 5]; nk1];
+    for i in 0..nk1 {
+        let q0 = i.saturating_sub(K1 - 1);
+        let d = a[i][0] - (q0..i).map(|q| r[q][i - q] * r[q][i - q]).sum::<f64>();
         // (A NaN pivot fails too.)
-        if d.is_nan() || d <= 1e-12 * scale {
+        if d.is_nan() || d <= NORMAL_PIVOT_MIN * a[i][0] {
             return None;
         }
         let rii = d.sqrt();
-        r[i][i] = rii;
-        for j in i + 1..4 {
-            let e = a[i][j] - r[..i].iter().map(|row| row[i] * row[j]).sum::<f64>();
+        r[i][0] = rii;
+        for j in 1..K1.min(nk1 - i) {
+            // Rows q < i + j - 3 have no entry in column i + j (bandwidth 4).
+            let qj = q0.max((i + j).saturating_sub(K1 - 1));
+            let e = a[i][j] - (qj..i).map(|q| r[q][i - q] * r[q][i + j - q]).sum::<f64>();
             r[i][j] = e / rii;
         }
     }
-    // z = R^-T (B^T x) (forward), c = R^-1 z (back), for the centred data.
-    let mut z = [[0.0f64; 4]; 2];
-    let mut c = [[0.0f64; 4]; 2];
+    // z = R^-T (B^T x) by forward substitution, then c = R^-1 z.
+    let mut z = [vec![0.0f64; nk1], vec![0.0f64; nk1]];
     for d in 0..2 {
-        for i in 0..4 {
-            let mut acc = rhs[d][i];
-            for q in 0..i {
-                acc -= r[q][i] * z[d][q];
-            }
-            z[d][i] = acc / r[i][i];
-        }
-        for i in (0..4).rev() {
-            let mut acc = z[d][i];
-            for q in i + 1..4 {
-                acc -= r[i][q] * c[d][q];
-            }
-            c[d][i] = acc / r[i][i];
+        for i in 0..nk1 {
+            let q0 = i.saturating_sub(K1 - 1);
+            let acc = rhs[d][i] - (q0..i).map(|q| r[q][i - q] * z[d][q]).sum::<f64>();
+            z[d][i] = acc / r[i][0];
         }
     }
+    let mut c = [
+        back_substitute(&r, &z[0], K1),
+        back_substitute(&r, &z[1], K1),
+    ];
     let mut fp = 0.0;
-    for (h, xy) in des.basis.iter().zip(x) {
+    for ((h, xy), &l) in des.basis.iter().zip(x).zip(&des.interval) {
+        let j0 = l - 3;
         for d in 0..2 {
-            let fit: f64 = (0..4).map(|i| c[d][i] * h[i]).sum();
+            let fit: f64 = (0..K1).map(|i| c[d][j0 + i] * h[i]).sum();
             let e = fit - (xy[d] - origin[d]);
             fp += e * e;
         }
@@ -385,25 +393,17 @@ fn lsq_fit_cubic_polynomial(x: &[[f64; 2]], des: &Design) -> Option<LsqFit> {
     if !fp.is_finite() {
         return None;
     }
-    // Back to the data's frame: c + origin; z + R (1 * origin) (as Q^T x of the uncentred data).
-    let rows: Vec<[f64; 5]> = (0..4)
-        .map(|i| {
-            let mut row = [0.0; 5];
-            row[..4 - i].copy_from_slice(&r[i][i..]);
-            row
-        })
-        .collect();
-    let shift = |d: usize| -> Vec<f64> {
-        (0..4)
-            .map(|i| z[d][i] + origin[d] * (i..4).map(|j| r[i][j]).sum::<f64>())
-            .collect()
-    };
-    Some(LsqFit {
-        r: rows,
-        z: [shift(0), shift(1)],
-        c: [0, 1].map(|d| c[d].iter().map(|v| v + origin[d]).collect()),
-        fp,
-    })
+    // Back to the data's frame: c + origin; z + R (1 * origin).
+    for d in 0..2 {
+        for v in c[d].iter_mut() {
+            *v += origin[d];
+        }
+        for i in 0..nk1 {
+            let row_sum: f64 = r[i][..K1.min(nk1 - i)].iter().sum();
+            z[d][i] += origin[d] * row_sum;
+        }
+    }
+    Some(LsqFit { r, z, c, fp })
 }
 
 /// Squared residual of data point `it` for coefficients `c`.
@@ -654,8 +654,8 @@ fn fit_parametric(u: &[f64], x: &[[f64; 2]], k: usize, s: f64) -> SplineCurve {
         let n = t.len();
         let first = n == nmin;
         let des = design(&t, k, u);
-        let fit = if first && k == 3 {
-            lsq_fit_cubic_polynomial(x, &des).unwrap_or_else(|| lsq_fit(&t, k, x, &des))
+        let fit = if k == 3 {
+            lsq_fit_cubic_normal(&t, x, &des).unwrap_or_else(|| lsq_fit(&t, k, x, &des))
         } else {
             lsq_fit(&t, k, x, &des)
         };
@@ -765,6 +765,10 @@ fn smooth_on_knots(
             }
             let mut xi = [0.0; 2];
             for j in it..nk1 {
+                // Once the row is eliminated, FITPACK's remaining rotations are identities.
+                if h[..k2].iter().all(|&v| v == 0.0) {
+                    break;
+                }
                 let (cos, sin) = givens(h[0], &mut g[j][0]);
                 for d in 0..2 {
                     rotate(cos, sin, &mut xi[d], &mut c[d][j]);

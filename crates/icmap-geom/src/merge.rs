@@ -47,7 +47,7 @@ struct Projector<'a> {
     hint: usize,
     /// Absolute slack (metres) making the skip bound safe against rounding.
     slack: f64,
-    /// Per segment (short polylines only): start x, y, direction x, y, squared length.
+    /// Per segment (short polylines only): start x, y, direction x, y, 1 / squared length.
     soa: Option<[Vec<f64>; 5]>,
 }
 
@@ -70,7 +70,7 @@ impl<'a> Projector<'a> {
                 soa[1].push(g[i].y);
                 soa[2].push(d.x);
                 soa[3].push(d.y);
-                soa[4].push(len * len);
+                soa[4].push(1.0 / (len * len));
             }
             soa
         });
@@ -94,7 +94,7 @@ impl<'a> Projector<'a> {
         if len <= 0.0 {
             return None;
         }
-        let t_raw = (p - g[i]).dot(&d) / (len * len);
+        let t_raw = (p - g[i]).dot(&d) * (1.0 / (len * len));
         let t = t_raw.clamp(0.0, 1.0);
         let dist2 = (p - (g[i] + d * t)).norm_squared();
         let t_ext = if (i == 0 && t_raw < 0.0) || (i == nseg - 1 && t_raw > 1.0) {
@@ -116,18 +116,23 @@ impl<'a> Projector<'a> {
     /// Every segment tested: the squared distances in one vectorisable pass (the arithmetic of
     /// [`Self::segment`]), then the first minimum.
     fn project_all(&self, p: &Point) -> (f64, Vector2<f64>) {
-        let Some([gx, gy, dx, dy, len2]) = &self.soa else {
+        let Some([gx, gy, dx, dy, inv_len2]) = &self.soa else {
             return self.project_scan_from(p, 0).0;
         };
         let nseg = gx.len();
         let mut dist2 = [f64::INFINITY; ALL_SEGMENTS_MAX];
         for i in 0..nseg {
             let (ax, ay) = (p.x - gx[i], p.y - gy[i]);
-            let t_raw = (ax * dx[i] + ay * dy[i]) / len2[i];
+            let t_raw = (ax * dx[i] + ay * dy[i]) * inv_len2[i];
             let t = t_raw.clamp(0.0, 1.0);
             let (ex, ey) = (p.x - (gx[i] + dx[i] * t), p.y - (gy[i] + dy[i] * t));
             let d2 = ex * ex + ey * ey;
-            dist2[i] = if len2[i] > 0.0 { d2 } else { f64::INFINITY };
+            // (A zero-length segment has an infinite reciprocal: no candidate, as in `segment`.)
+            dist2[i] = if inv_len2[i].is_finite() {
+                d2
+            } else {
+                f64::INFINITY
+            };
         }
         let mut best_i = usize::MAX;
         let mut best = f64::INFINITY;
@@ -523,7 +528,7 @@ mod tests {
             if len <= 0.0 {
                 continue;
             }
-            let t_raw = (p - g[i]).dot(&d) / (len * len);
+            let t_raw = (p - g[i]).dot(&d) * (1.0 / (len * len));
             let t = t_raw.clamp(0.0, 1.0);
             let dist2 = (p - (g[i] + d * t)).norm_squared();
             if dist2 < best.0 {
