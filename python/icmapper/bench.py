@@ -419,7 +419,19 @@ def add_geometry_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run_geometry(args: argparse.Namespace) -> int:
-    """Runs the geometry benchmark and prints a table of per-frame times and ratios."""
+    """Runs the geometry benchmark and prints a table of per-frame times and ratios.
+
+    BLAS runs single-threaded meanwhile: neither side calls BLAS in the timed frames, but
+    OpenBLAS's idle worker threads spin after numpy's set-up work and would take the CPU that
+    ``merge_many``'s threads need.
+    """
+    from threadpoolctl import threadpool_limits
+
+    with threadpool_limits(limits=1, user_api="blas"):
+        return _run_geometry(args)
+
+
+def _run_geometry(args: argparse.Namespace) -> int:
     import os
 
     print(

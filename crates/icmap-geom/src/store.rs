@@ -13,6 +13,16 @@ use crate::types::{validate_points, MapClass, Patch, Point};
 use parry2d_f64::bounding_volume::Aabb;
 use std::collections::HashMap;
 
+/// Wakes the threads that [`GlobalMap::merge_many`] shares its work with, ahead of a call: a
+/// sleeping thread takes tens of microseconds to wake, a good part of a frame's merges, so a
+/// caller that first converts its input (the Python binding) starts the wake-up before. Optional;
+/// without it the merges start on the calling thread and the others join when awake.
+pub fn wake_merge_workers() {
+    for _ in 1..rayon::current_num_threads() {
+        rayon::spawn(|| ());
+    }
+}
+
 /// The class rule of a merge: the detection `points` (world frame) merged into the current
 /// geometry `current` of an instance (polygon union for a closed crossing ring, curve-fit merge for
 /// a polyline), checked to keep the store's invariants.
@@ -366,7 +376,8 @@ impl GlobalMap {
     /// an item that fails (unknown id, bad geometry) leaves the instance as the items before it
     /// made it, and does not affect the others.
     pub fn merge_many(&mut self, items: &[(u64, &[Point])], frame: i64) -> Vec<Result<()>> {
-        use rayon::prelude::*;
+        use std::sync::atomic::{AtomicUsize, Ordering};
+        use std::sync::OnceLock;
         let mut results: Vec<Result<()>> = (0..items.len()).map(|_| Ok(())).collect();
         // Group the items by instance, in order of first appearance.
         let mut group_of: HashMap<u64, usize> = HashMap::new();
@@ -410,12 +421,45 @@ impl GlobalMap {
             }
             (current, merged, errs)
         };
-        // Parallel only where there is enough work to share (a merge takes ~10 us).
-        let outcomes: Vec<GroupOutcome> = if groups.len() >= 4 {
-            groups.par_iter().map(outcome).collect()
-        } else {
-            groups.iter().map(outcome).collect()
+        // The calling thread works through the groups (largest first) and rayon's other threads
+        // join in as they wake up, taking the next group from a shared counter: no wait for a
+        // pool wake-up before the first merge (which costs as much as several merges).
+        let mut order: Vec<usize> = (0..groups.len()).collect();
+        let cost = |g: usize| -> usize {
+            let (slot, members) = &groups[g];
+            let own = slots[*slot as usize]
+                .as_ref()
+                .map_or(0, |inst| inst.points.len());
+            own + members.iter().map(|&i| items[i].1.len()).sum::<usize>()
         };
+        order.sort_by_key(|&g| std::cmp::Reverse(cost(g)));
+        let done: Vec<OnceLock<GroupOutcome>> =
+            (0..groups.len()).map(|_| OnceLock::new()).collect();
+        let next = AtomicUsize::new(0);
+        let work = || loop {
+            let k = next.fetch_add(1, Ordering::Relaxed);
+            let Some(&g) = order.get(k) else { break };
+            let _ = done[g].set(outcome(&groups[g]));
+        };
+        let helpers = if groups.len() >= 4 {
+            rayon::current_num_threads()
+                .saturating_sub(1)
+                .min(groups.len() - 1)
+        } else {
+            0
+        };
+        rayon::in_place_scope(|scope| {
+            for _ in 0..helpers {
+                scope.spawn(|_| work());
+            }
+            work();
+        });
+        // (Every group is done once the scope ends; one left undone would be computed here.)
+        let outcomes: Vec<GroupOutcome> = done
+            .into_iter()
+            .zip(&groups)
+            .map(|(cell, group)| cell.into_inner().unwrap_or_else(|| outcome(group)))
+            .collect();
         for ((slot, members), (geometry, merged, errs)) in groups.iter().zip(outcomes) {
             for (i, e) in errs {
                 results[i] = Err(e);

@@ -167,6 +167,9 @@ impl PyGlobalMap {
         points: &Bound<'py, PyAny>,
         frame: i64,
     ) -> PyResult<Vec<Option<Bound<'py, PyAny>>>> {
+        if ids.len().is_ok_and(|n| n >= 4) {
+            geom::store::wake_merge_workers(); // they wake while the arguments are converted
+        }
         // Per item: the id, or the KeyError of an int that cannot be an instance id.
         let mut id_list: Vec<Result<u64, PyErr>> = Vec::new();
         for item in ids
