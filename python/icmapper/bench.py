@@ -17,11 +17,13 @@ inputs, on synthetic city-like maps of 1e2 .. 1e5 instances.
 from __future__ import annotations
 
 import argparse
+import contextlib
+import gc
 import importlib
 import math
 import sys
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from typing import Any
 
@@ -339,6 +341,19 @@ def _engine_map(instances: list[tuple[int, np.ndarray]]) -> Any:
     return gm
 
 
+@contextlib.contextmanager
+def _no_gc() -> Iterator[None]:
+    """Python's cyclic garbage collector off for a timed section (as ``timeit`` does): with 1e5
+    instances the set-up keeps millions of objects alive, and a full collection landing inside a
+    timed frame would be charged to whichever side happened to allocate."""
+    gc.collect()
+    gc.disable()
+    try:
+        yield
+    finally:
+        gc.enable()
+
+
 def _bench_size(n: int, frames: int, ref_frames: int, seed: int) -> SizeResult:
     instances = city_instances(n, seed)
     gm = _engine_map(instances)
@@ -353,25 +368,27 @@ def _bench_size(n: int, frames: int, ref_frames: int, seed: int) -> SizeResult:
     ks: list[int] = []
     engine_ids: list[list[int]] = []
     t_sample = 0.0
-    t0 = time.perf_counter()
-    for pose, det in zip(poses, dets, strict=True):
-        t1 = time.perf_counter()
-        ids, _cls, _pts, _mask = gm.sample_patch(pose, RANGE, margin=MARGIN, n_points=N_POINTS)
-        t_sample += time.perf_counter() - t1
-        for i, d in det:
-            gm.merge(i, d, frame=1)
-        ks.append(len(ids))
-        engine_ids.append(ids.tolist())
-    engine_ms = (time.perf_counter() - t0) / frames * 1e3
+    with _no_gc():
+        t0 = time.perf_counter()
+        for pose, det in zip(poses, dets, strict=True):
+            t1 = time.perf_counter()
+            ids, _cls, _pts, _mask = gm.sample_patch(pose, RANGE, margin=MARGIN, n_points=N_POINTS)
+            t_sample += time.perf_counter() - t1
+            for i, d in det:
+                gm.merge(i, d, frame=1)
+            ks.append(len(ids))
+            engine_ids.append(ids.tolist())
+        engine_ms = (time.perf_counter() - t0) / frames * 1e3
     engine_sample_ms = t_sample / frames * 1e3
 
     # The same frames with one merge_many call per frame (the online mapper's way).
     batch_in = [([i for i, _ in det], [d for _, d in det]) for det in dets]
-    t0 = time.perf_counter()
-    for pose, (det_ids, det_pts) in zip(poses, batch_in, strict=True):
-        batched.sample_patch(pose, RANGE, margin=MARGIN, n_points=N_POINTS)
-        batched.merge_many(det_ids, det_pts, frame=1)
-    batched_ms = (time.perf_counter() - t0) / frames * 1e3
+    with _no_gc():
+        t0 = time.perf_counter()
+        for pose, (det_ids, det_pts) in zip(poses, batch_in, strict=True):
+            batched.sample_patch(pose, RANGE, margin=MARGIN, n_points=N_POINTS)
+            batched.merge_many(det_ids, det_pts, frame=1)
+        batched_ms = (time.perf_counter() - t0) / frames * 1e3
     for i in (int(j) for j in gm.ids()[:: max(1, len(gm) // 50)]):
         if gm.get(i)[1].tobytes() != batched.get(i)[1].tobytes():
             raise RuntimeError(f"merge_many and merge disagree on instance {i}")
@@ -380,15 +397,16 @@ def _bench_size(n: int, frames: int, ref_frames: int, seed: int) -> SizeResult:
     if ref is not None:
         same = 0
         t_sample = 0.0
-        t0 = time.perf_counter()
-        for f in range(ref_frames):
-            t1 = time.perf_counter()
-            ids, _cls, _pts, _mask = ref.sample_patch(poses[f])
-            t_sample += time.perf_counter() - t1
-            for i, d in dets[f]:
-                ref.merge(i, d)
-            same += ids.tolist() == engine_ids[f]
-        reference_ms = (time.perf_counter() - t0) / ref_frames * 1e3
+        with _no_gc():
+            t0 = time.perf_counter()
+            for f in range(ref_frames):
+                t1 = time.perf_counter()
+                ids, _cls, _pts, _mask = ref.sample_patch(poses[f])
+                t_sample += time.perf_counter() - t1
+                for i, d in dets[f]:
+                    ref.merge(i, d)
+                same += ids.tolist() == engine_ids[f]
+            reference_ms = (time.perf_counter() - t0) / ref_frames * 1e3
         reference_sample_ms = t_sample / ref_frames * 1e3
         agree = f"{same}/{ref_frames}"
     return SizeResult(
