@@ -859,6 +859,9 @@ const GL3_W_MID: f64 = 8.0 / 18.0;
 const QUAD_TOL: f64 = 1e-5;
 /// Length of the arc-length table's pieces before any split, in spacings.
 const PIECE_SPACINGS: f64 = 4.0;
+/// Tolerance (relative to `spacing`) on the arc length of an inverted sample, far below the
+/// documented `1e-3 * spacing`.
+const INVERT_TOL: f64 = 1e-9;
 /// Maximal bisection depth of a piece.
 const QUAD_MAX_DEPTH: u32 = 12;
 
@@ -1073,9 +1076,9 @@ fn quad_pieces(
 
 /// The parameter `tau` in `piece` at arc length `r` from its start (`0 <= r <= piece.len`): the
 /// root of the piece's arc-length model ([`arc_model`]) by Newton iteration safeguarded by
-/// bisection. The model integrates the quartic interpolant of the speed, whose error on a piece
+/// bisection, to `tol` (metres of arc length). The model integrates the quartic interpolant of the speed, whose error on a piece
 /// that passed the quadrature test is far below the documented `1e-3 * spacing` (tested).
-fn invert(piece: &Piece, r: f64) -> f64 {
+fn invert(piece: &Piece, r: f64, tol: f64) -> f64 {
     let (t0, t1) = (piece.t0, piece.t1);
     if piece.len.is_nan() || piece.len <= 0.0 {
         return t0;
@@ -1083,7 +1086,6 @@ fn invert(piece: &Piece, r: f64) -> f64 {
     let c = &piece.arc;
     let (mut lo, mut hi) = (0.0f64, 1.0f64);
     let mut x = (r / piece.len).clamp(0.0, 1.0);
-    let tol = 1e-12 * piece.len;
     for _ in 0..60 {
         let f = x * (c[1] + x * (c[2] + x * (c[3] + x * (c[4] + x * c[5])))) - r;
         if f.abs() <= tol {
@@ -1218,7 +1220,7 @@ fn arc_length_samples(curve: &SplineCurve, spacing: f64) -> Result<(Vec<Span>, V
             pi += 1;
         }
         let piece = &pieces[pi];
-        let tau = invert(piece, target - piece.s0);
+        let tau = invert(piece, target - piece.s0, INVERT_TOL * spacing);
         out.push((piece.span, tau.clamp(0.0, 1.0)));
     }
     out.push((spans.len() - 1, 1.0));

@@ -38,8 +38,10 @@ const DEDUP_EPS: f64 = 1e-9;
 /// `cum[j + 1] - cum[i]` of vertex `i`), starting from the previous query's segment, so that
 /// queries along the polyline cost about O(log m) segment tests instead of O(m).
 ///
-/// Short polylines (at most [`ALL_SEGMENTS_MAX`] segments) test every segment instead, in a loop
-/// the compiler vectorises, with the same arithmetic and tie rule (so the same result).
+/// Short polylines (at most [`ALL_SEGMENTS_MAX`] segments) are cut into blocks of [`BLOCK`]
+/// segments instead, each with a bounding circle: starting from the distance to the previous
+/// query's segment, a block whose circle lies farther than the best distance so far is skipped,
+/// the segments of the others get the exact test (the same result, with the same tie rule).
 struct Projector<'a> {
     g: &'a [Point],
     cum: &'a [f64],
@@ -47,12 +49,15 @@ struct Projector<'a> {
     hint: usize,
     /// Absolute slack (metres) making the skip bound safe against rounding.
     slack: f64,
-    /// Per segment (short polylines only): start x, y, direction x, y, 1 / squared length.
-    soa: Option<[Vec<f64>; 5]>,
+    /// Per block of [`BLOCK`] consecutive segments (short polylines only): the centre and the
+    /// half diagonal of its vertices' bounding box (every point of the block lies that near).
+    blocks: Option<Vec<[f64; 3]>>,
 }
 
-/// Polylines with at most this many segments are projected onto by testing every segment.
+/// Polylines with at most this many segments are projected onto by the block test.
 const ALL_SEGMENTS_MAX: usize = 64;
+/// Segments per block of the block test.
+const BLOCK: usize = 4;
 
 impl<'a> Projector<'a> {
     fn new(g: &'a [Point], cum: &'a [f64]) -> Self {
@@ -61,25 +66,27 @@ impl<'a> Projector<'a> {
             .map(|q| q.x.abs().max(q.y.abs()))
             .fold(cum[cum.len() - 1], f64::max);
         let nseg = g.len() - 1;
-        let soa = (nseg <= ALL_SEGMENTS_MAX).then(|| {
-            let mut soa: [Vec<f64>; 5] = std::array::from_fn(|_| Vec::with_capacity(nseg));
-            for i in 0..nseg {
-                let d = g[i + 1] - g[i];
-                let len = cum[i + 1] - cum[i];
-                soa[0].push(g[i].x);
-                soa[1].push(g[i].y);
-                soa[2].push(d.x);
-                soa[3].push(d.y);
-                soa[4].push(1.0 / (len * len));
-            }
-            soa
+        let blocks = (nseg <= ALL_SEGMENTS_MAX).then(|| {
+            (0..nseg)
+                .step_by(BLOCK)
+                .map(|b0| {
+                    let pts = &g[b0..=(b0 + BLOCK).min(nseg)];
+                    let (mut lo, mut hi) = (pts[0], pts[0]);
+                    for q in pts {
+                        lo = Point::new(lo.x.min(q.x), lo.y.min(q.y));
+                        hi = Point::new(hi.x.max(q.x), hi.y.max(q.y));
+                    }
+                    let half = (hi - lo) * 0.5;
+                    [lo.x + half.x, lo.y + half.y, half.norm()]
+                })
+                .collect()
         });
         Projector {
             g,
             cum,
             hint: 0,
             slack: 1e-9 * (1.0 + scale),
-            soa,
+            blocks,
         }
     }
 
@@ -105,48 +112,67 @@ impl<'a> Projector<'a> {
         Some((dist2, cum[i] + t_ext * len, d / len))
     }
 
+    /// The squared distance of [`Self::segment`] alone (the same arithmetic).
+    #[inline]
+    fn dist2(&self, i: usize, p: &Point) -> Option<f64> {
+        let g = self.g;
+        let d = g[i + 1] - g[i];
+        let len = self.cum[i + 1] - self.cum[i];
+        if len <= 0.0 {
+            return None;
+        }
+        let t_raw = (p - g[i]).dot(&d) * (1.0 / (len * len));
+        let t = t_raw.clamp(0.0, 1.0);
+        Some((p - (g[i] + d * t)).norm_squared())
+    }
+
     fn project(&mut self, p: &Point) -> (f64, Vector2<f64>) {
-        if self.soa.is_some() {
+        if self.blocks.is_some() {
             self.project_all(p)
         } else {
             self.project_scan(p)
         }
     }
 
-    /// Every segment tested: the squared distances in one vectorisable pass (the arithmetic of
-    /// [`Self::segment`]), then the first minimum.
-    fn project_all(&self, p: &Point) -> (f64, Vector2<f64>) {
-        let Some([gx, gy, dx, dy, inv_len2]) = &self.soa else {
+    /// Every segment considered: blocks of segments that cannot hold a nearer point skipped, the
+    /// exact test on the segments of the others.
+    fn project_all(&mut self, p: &Point) -> (f64, Vector2<f64>) {
+        let Some(blocks) = &self.blocks else {
             return self.project_scan_from(p, 0).0;
         };
-        let nseg = gx.len();
-        let mut dist2 = [f64::INFINITY; ALL_SEGMENTS_MAX];
-        for i in 0..nseg {
-            let (ax, ay) = (p.x - gx[i], p.y - gy[i]);
-            let t_raw = (ax * dx[i] + ay * dy[i]) * inv_len2[i];
-            let t = t_raw.clamp(0.0, 1.0);
-            let (ex, ey) = (p.x - (gx[i] + dx[i] * t), p.y - (gy[i] + dy[i] * t));
-            let d2 = ex * ex + ey * ey;
-            // (A zero-length segment has an infinite reciprocal: no candidate, as in `segment`.)
-            dist2[i] = if inv_len2[i].is_finite() {
-                d2
-            } else {
-                f64::INFINITY
-            };
-        }
-        let mut best_i = usize::MAX;
-        let mut best = f64::INFINITY;
-        for (i, &d2) in dist2[..nseg].iter().enumerate() {
-            if d2 < best {
-                best = d2;
-                best_i = i;
+        let nseg = self.g.len() - 1;
+        // The previous query's segment gives a first bound; a block whose bounding circle lies
+        // farther than the best distance so far (plus a rounding slack) cannot hold a nearer point.
+        let hint = self.hint.min(nseg - 1);
+        let mut best = self.dist2(hint, p);
+        let mut best_i = if best.is_some() { hint } else { usize::MAX };
+        for (b, &[cx, cy, radius]) in blocks.iter().enumerate() {
+            let bound = best.map_or(f64::INFINITY, |d2| d2.sqrt() + self.slack) + radius;
+            let (ex, ey) = (p.x - cx, p.y - cy);
+            if ex * ex + ey * ey > bound * bound {
+                continue;
+            }
+            for i in b * BLOCK..((b + 1) * BLOCK).min(nseg) {
+                if i == hint {
+                    continue;
+                }
+                if let Some(d2) = self.dist2(i, p) {
+                    let better = match best {
+                        None => true,
+                        Some(bd) => d2 < bd || (d2 == bd && i < best_i),
+                    };
+                    if better {
+                        best = Some(d2);
+                        best_i = i;
+                    }
+                }
             }
         }
-        match (best_i != usize::MAX)
-            .then(|| self.segment(best_i, p))
-            .flatten()
-        {
-            Some((_, s, tangent)) => (s, tangent),
+        match best.and_then(|_| self.segment(best_i, p)) {
+            Some((_, s, tangent)) => {
+                self.hint = best_i;
+                (s, tangent)
+            }
             None => (0.0, Vector2::new(1.0, 0.0)),
         }
     }
