@@ -160,6 +160,18 @@ fn givens_bounded(piv: f64, ww: &mut f64) -> (f64, f64) {
     (cos, sin)
 }
 
+/// [`givens_bounded`] while both entries are far from overflow when squared, [`givens`] (FITPACK's
+/// scaled form) otherwise: the smoothing rows are scaled by `1 / p`, which can be large.
+#[inline]
+fn givens_scaled(piv: f64, ww: &mut f64) -> (f64, f64) {
+    const SAFE: f64 = 1e150;
+    if piv.abs() < SAFE && ww.abs() < SAFE {
+        givens_bounded(piv, ww)
+    } else {
+        givens(piv, ww)
+    }
+}
+
 /// Applies a Givens rotation to the pair `(a, b)` (FITPACK `fprota`).
 fn rotate(cos: f64, sin: f64, a: &mut f64, b: &mut f64) {
     let (s1, s2) = (*a, *b);
@@ -769,7 +781,7 @@ fn smooth_on_knots(
                 if h[..k2].iter().all(|&v| v == 0.0) {
                     break;
                 }
-                let (cos, sin) = givens(h[0], &mut g[j][0]);
+                let (cos, sin) = givens_scaled(h[0], &mut g[j][0]);
                 for d in 0..2 {
                     rotate(cos, sin, &mut xi[d], &mut c[d][j]);
                 }
