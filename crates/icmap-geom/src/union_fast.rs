@@ -53,6 +53,10 @@ pub(crate) const MAX_VERTICES: usize = 2048;
 /// Relative distance (to the joint extent) under which two features count as touching.
 const REL_TOL: f64 = 1e-7;
 
+/// Slack on the cheap lower bounds that decide whether the exact distance test [`near`] is
+/// needed: a bound within rounding of `tol` still runs the exact test.
+const NEAR_MARGIN: f64 = 1.0 + 1e-9;
+
 #[derive(Clone, Copy, Debug)]
 struct V {
     x: f64,
@@ -119,22 +123,28 @@ fn inside(p: V, r: &[V]) -> bool {
     c
 }
 
-/// One edge of the sweep: ring (0 or 1), index of its first vertex, bounding box grown by tol
-/// (`x` along the sweep axis, `y` across it).
+/// One edge of a ring: ring (0 or 1), index of its first vertex.
 #[derive(Clone, Copy)]
 struct Edge {
     ring: u8,
     i: u32,
-    /// Index of the next edge's first vertex in the same ring.
-    next: u32,
     p: V,
     q: V,
     /// Length of the edge.
     len: f64,
+}
+
+/// The bounding box of an edge grown by tol (`x` along the sweep axis, `y` across it).
+#[derive(Clone, Copy)]
+struct SweepBox {
     x0: f64,
     x1: f64,
     y0: f64,
     y1: f64,
+    /// Index into the edge list.
+    edge: u32,
+    /// Index of the next edge of the same ring in the edge list.
+    next: u32,
 }
 
 /// A proper crossing of edge `ea` of ring 0 with edge `eb` of ring 1.
@@ -151,17 +161,58 @@ struct Cross {
     a_exits: bool,
 }
 
-#[derive(Clone, Copy, PartialEq, Eq)]
-enum Node {
-    Vertex(u32),
-    Cross(u32),
-}
-
 /// Union of two closed rings (no repeated closing point, finite, at least 3 points each) when
 /// both are simple and in general position (see the module doc for the exact rule); `None` asks
 /// the caller to use the general overlay. Outer rings counter-clockwise, largest area first,
 /// holes dropped, each starting at the predecessor of its smallest `(x, y)` (module doc, step 4).
 pub(crate) fn union_two_simple(a: &[Point], b: &[Point]) -> Option<Vec<Vec<Point>>> {
+    SCRATCH.with(|sc| match sc.try_borrow_mut() {
+        Ok(mut sc) => union_in(a, b, &mut sc),
+        Err(_) => union_in(a, b, &mut Scratch::default()),
+    })
+}
+
+/// Working buffers of [`union_two_simple`], kept per thread so that a merge allocates little
+/// more than its output.
+#[derive(Default)]
+struct Scratch {
+    ra: Vec<V>,
+    rb: Vec<V>,
+    edges: Vec<Edge>,
+    boxes: Vec<SweepBox>,
+    sorted: Vec<SweepBox>,
+    start: Vec<u32>,
+    fill: Vec<u32>,
+    cand: Vec<u32>,
+    crosses: Vec<Cross>,
+    /// Per ring: crossing ids in order along the ring, and each crossing's place in that order.
+    order: [Vec<u32>; 2],
+    rank: [Vec<u32>; 2],
+    visited: Vec<bool>,
+    ring_pts: Vec<Point>,
+}
+
+thread_local! {
+    static SCRATCH: std::cell::RefCell<Scratch> = std::cell::RefCell::new(Scratch::default());
+}
+
+/// [`union_two_simple`] with the given working buffers.
+fn union_in(a: &[Point], b: &[Point], sc: &mut Scratch) -> Option<Vec<Vec<Point>>> {
+    let Scratch {
+        ra,
+        rb,
+        edges,
+        boxes,
+        sorted,
+        start,
+        fill,
+        cand,
+        crosses,
+        order,
+        rank,
+        visited,
+        ring_pts,
+    } = sc;
     let (n, m) = (a.len(), b.len());
     if n < 3 || m < 3 || n + m > MAX_VERTICES {
         return None;
@@ -171,8 +222,10 @@ pub(crate) fn union_two_simple(a: &[Point], b: &[Point]) -> Option<Vec<Vec<Point
         x: p.x - origin.x,
         y: p.y - origin.y,
     };
-    let mut ra: Vec<V> = a.iter().map(to_local).collect();
-    let mut rb: Vec<V> = b.iter().map(to_local).collect();
+    ra.clear();
+    ra.extend(a.iter().map(to_local));
+    rb.clear();
+    rb.extend(b.iter().map(to_local));
     let (mut x0, mut x1, mut y0, mut y1) = (
         f64::INFINITY,
         f64::NEG_INFINITY,
@@ -194,8 +247,8 @@ pub(crate) fn union_two_simple(a: &[Point], b: &[Point]) -> Option<Vec<Vec<Point
 
     // Orientation (counter-clockwise) and non-degenerate area. The original vertex order is kept
     // in `ia`/`ib` so that output vertices are the caller's exact coordinates.
-    let mut area_a = area2(&ra);
-    let mut area_b = area2(&rb);
+    let mut area_a = area2(ra);
+    let mut area_b = area2(rb);
     let min_area2 = tol * extent;
     if !(area_a.abs() > min_area2 && area_b.abs() > min_area2) {
         return None;
@@ -218,14 +271,14 @@ pub(crate) fn union_two_simple(a: &[Point], b: &[Point]) -> Option<Vec<Vec<Point
             (_, _, true) => b[m - 1 - i],
         }
     };
-    let rings: [&[V]; 2] = [&ra, &rb];
+    let rings: [&[V]; 2] = [ra, rb];
 
     // Edges, no edge shorter than tol. The sweep runs along the longer side of the bounding box
     // (a crossing is long and thin: across it, every edge would overlap every other one).
     let along_x = x1 - x0 >= y1 - y0;
     let sweep = |p: V| if along_x { p.x } else { p.y };
     let across = |p: V| if along_x { p.y } else { p.x };
-    let mut edges: Vec<Edge> = Vec::with_capacity(n + m);
+    edges.clear();
     for (ring, r) in rings.iter().enumerate() {
         let k = r.len();
         for i in 0..k {
@@ -238,42 +291,106 @@ pub(crate) fn union_two_simple(a: &[Point], b: &[Point]) -> Option<Vec<Vec<Point
             edges.push(Edge {
                 ring: ring as u8,
                 i: i as u32,
-                next: next as u32,
                 p,
                 q,
                 len: d.dot(d).sqrt(),
-                x0: sweep(p).min(sweep(q)) - tol,
-                x1: sweep(p).max(sweep(q)) + tol,
-                y0: across(p).min(across(q)) - tol,
-                y1: across(p).max(across(q)) + tol,
             });
         }
     }
-    edges.sort_unstable_by(|e, f| e.x0.total_cmp(&f.x0));
-
-    let mut crosses: Vec<Cross> = Vec::new();
+    // Neighbours (consecutive edges p-v, v-q of one ring): the far ends must not come back near
+    // the other edge (spike). A triangle has every pair adjacent both ways: this covers both.
+    // `|c| / |pv|` is q's distance to the line through p and v, a lower bound of its distance
+    // to the segment (likewise p's to v-q): only a nearly collinear pair needs the exact test.
+    for (ring, r) in rings.iter().enumerate() {
+        let base = if ring == 0 { 0 } else { n };
+        let k = r.len();
+        for i in 0..k {
+            let (e, f) = (
+                &edges[base + i],
+                &edges[base + if i + 1 == k { 0 } else { i + 1 }],
+            );
+            let (p, v, q) = (e.p, e.q, f.q);
+            let c = v.sub(p).cross(q.sub(v)).abs();
+            if c <= tol * e.len.max(f.len) * NEAR_MARGIN
+                && (near(q, p, v, tol2) || near(p, v, q, tol2))
+            {
+                return None;
+            }
+        }
+    }
+    // Candidate pairs: edges whose bounding boxes (grown by tol) overlap. The boxes are bucketed
+    // by their start along the sweep axis (a counting sort: `bucket` is monotone in x, so a box
+    // overlapping box `e` starts in a bucket between `e`'s and that of `e`'s end). Every pair is
+    // met once, from the box that comes first in bucket order. The overlap test is branch-free:
+    // candidates are written to a buffer and kept by advancing its length.
+    let ne = edges.len();
+    boxes.clear();
+    let mut lo = f64::INFINITY;
+    let mut hi = f64::NEG_INFINITY;
     for (k, e) in edges.iter().enumerate() {
-        for f in &edges[k + 1..] {
-            if f.x0 > e.x1 {
-                break;
-            }
-            if f.y0 > e.y1 || e.y0 > f.y1 {
-                continue;
-            }
+        let next = if k + 1 == n {
+            0
+        } else if k + 1 == ne {
+            n
+        } else {
+            k + 1
+        };
+        let bx = SweepBox {
+            x0: sweep(e.p).min(sweep(e.q)) - tol,
+            x1: sweep(e.p).max(sweep(e.q)) + tol,
+            y0: across(e.p).min(across(e.q)) - tol,
+            y1: across(e.p).max(across(e.q)) + tol,
+            edge: k as u32,
+            next: next as u32,
+        };
+        lo = lo.min(bx.x0);
+        hi = hi.max(bx.x0);
+        boxes.push(bx);
+    }
+    let nb = ne;
+    let scale = nb as f64 / (hi - lo);
+    let scale = if scale.is_finite() { scale } else { 0.0 };
+    let bucket = |x: f64| (((x - lo) * scale) as usize).min(nb - 1);
+    // `start[b]..start[b + 1]`: the boxes of bucket `b` in `sorted`.
+    start.clear();
+    start.resize(nb + 1, 0);
+    for bx in boxes.iter() {
+        start[bucket(bx.x0) + 1] += 1;
+    }
+    for b in 0..nb {
+        start[b + 1] += start[b];
+    }
+    fill.clear();
+    fill.extend_from_slice(&start[..nb]);
+    sorted.clear();
+    sorted.extend_from_slice(boxes);
+    for bx in boxes.iter() {
+        let b = bucket(bx.x0);
+        sorted[fill[b] as usize] = *bx;
+        fill[b] += 1;
+    }
+
+    crosses.clear();
+    cand.clear();
+    cand.resize(ne, 0);
+    for (k, be) in sorted.iter().enumerate() {
+        let end = start[bucket(be.x1) + 1] as usize;
+        let mut nc = 0usize;
+        for (j, bf) in sorted.iter().enumerate().take(end).skip(k + 1) {
+            let keep = (bf.x0 <= be.x1)
+                & (be.x0 <= bf.x1)
+                & (bf.y0 <= be.y1)
+                & (be.y0 <= bf.y1)
+                & (bf.edge != be.next)
+                & (be.edge != bf.next);
+            cand[nc] = j as u32;
+            nc += keep as usize;
+        }
+        for &j in &cand[..nc] {
+            let bf = &sorted[j as usize];
+            // Not neighbours (tested above).
+            let (e, f) = (&edges[be.edge as usize], &edges[bf.edge as usize]);
             let (p1, p2, q1, q2) = (e.p, e.q, f.p, f.q);
-            if e.ring == f.ring && (e.next == f.i || f.next == e.i) {
-                // Neighbours: the far ends must not come back near the other edge (spike). A
-                // triangle has every pair adjacent both ways: this test covers both.
-                let (p, v, q) = if e.next == f.i {
-                    (p1, p2, q2)
-                } else {
-                    (q1, q2, p2)
-                };
-                if near(q, p, v, tol2) || near(p, v, q, tol2) {
-                    return None;
-                }
-                continue;
-            }
             let (dp, dq) = (p2.sub(p1), q2.sub(q1));
             let d1 = dq.cross(p1.sub(q1));
             let d2 = dq.cross(p2.sub(q1));
@@ -281,11 +398,11 @@ pub(crate) fn union_two_simple(a: &[Point], b: &[Point]) -> Option<Vec<Vec<Point
             let d4 = dp.cross(q2.sub(p1));
             // |d1| / |q| is p1's distance to q's line, which bounds its distance to q from below:
             // only endpoints near the other edge's line need the exact segment distance.
-            let (lq, lp) = (tol * f.len, tol * e.len);
-            if (d1.abs() < lq && near(p1, q1, q2, tol2))
-                || (d2.abs() < lq && near(p2, q1, q2, tol2))
-                || (d3.abs() < lp && near(q1, p1, p2, tol2))
-                || (d4.abs() < lp && near(q2, p1, p2, tol2))
+            let (lq, lp) = (tol * f.len * NEAR_MARGIN, tol * e.len * NEAR_MARGIN);
+            if (d1.abs() <= lq && near(p1, q1, q2, tol2))
+                || (d2.abs() <= lq && near(p2, q1, q2, tol2))
+                || (d3.abs() <= lp && near(q1, p1, p2, tol2))
+                || (d4.abs() <= lp && near(q2, p1, p2, tol2))
             {
                 return None;
             }
@@ -362,9 +479,9 @@ pub(crate) fn union_two_simple(a: &[Point], b: &[Point]) -> Option<Vec<Vec<Point
         (0..len).map(|i| orig(ring, i)).collect()
     };
     if crosses.is_empty() {
-        let rings_out = if inside(ra[0], &rb) {
+        let rings_out = if inside(ra[0], rb) {
             vec![out_ring(1)]
-        } else if inside(rb[0], &ra) {
+        } else if inside(rb[0], ra) {
             vec![out_ring(0)]
         } else if area_a >= area_b {
             vec![out_ring(0), out_ring(1)]
@@ -377,10 +494,11 @@ pub(crate) fn union_two_simple(a: &[Point], b: &[Point]) -> Option<Vec<Vec<Point
         return None;
     }
 
-    // Node sequences of both rings with the crossings inserted in order along each edge.
-    let nodes_of = |ring: u8| -> Option<(Vec<Node>, Vec<u32>)> {
-        let r = rings[ring as usize];
-        let mut ids: Vec<u32> = (0..crosses.len() as u32).collect();
+    // The crossings in order along each ring (by edge, then by parameter along the edge); two
+    // crossings on one edge must be at least tol apart, and exits and entries must alternate.
+    let nc = crosses.len();
+    for ring in 0..2 {
+        let (ord, rk) = (&mut order[ring], &mut rank[ring]);
         let key = |c: &Cross| {
             if ring == 0 {
                 (c.ea, c.ta)
@@ -388,70 +506,50 @@ pub(crate) fn union_two_simple(a: &[Point], b: &[Point]) -> Option<Vec<Vec<Point
                 (c.eb, c.tb)
             }
         };
-        ids.sort_unstable_by(|&i, &j| {
+        ord.clear();
+        ord.extend(0..nc as u32);
+        ord.sort_unstable_by(|&i, &j| {
             let (ei, ti) = key(&crosses[i as usize]);
             let (ej, tj) = key(&crosses[j as usize]);
             ei.cmp(&ej).then(ti.total_cmp(&tj))
         });
-        let mut nodes = Vec::with_capacity(r.len() + ids.len());
-        let mut pos = vec![0u32; crosses.len()];
-        let mut it = ids.iter().peekable();
-        for i in 0..r.len() as u32 {
-            nodes.push(Node::Vertex(i));
-            let mut last_t: Option<f64> = None;
-            while let Some(&&c) = it.peek() {
-                let (e, t) = key(&crosses[c as usize]);
-                if e != i {
-                    break;
-                }
-                if let Some(lt) = last_t {
-                    let iu = i as usize;
-                    let q = if iu + 1 == r.len() { r[0] } else { r[iu + 1] };
-                    let d = q.sub(r[iu]);
-                    if (t - lt) * (t - lt) * d.dot(d) < tol2 {
-                        return None;
-                    }
-                }
-                last_t = Some(t);
-                pos[c as usize] = nodes.len() as u32;
-                nodes.push(Node::Cross(c));
-                it.next();
-            }
-        }
-        Some((nodes, pos))
-    };
-    let (nodes_a, pos_a) = nodes_of(0)?;
-    let (nodes_b, pos_b) = nodes_of(1)?;
-
-    // Exits and entries alternate along each ring.
-    for (ring, nodes) in [(0u8, &nodes_a), (1u8, &nodes_b)] {
-        let mut last: Option<bool> = None;
-        for node in nodes.iter() {
-            if let Node::Cross(c) = *node {
-                let exits = crosses[c as usize].a_exits == (ring == 0);
-                if last == Some(exits) {
+        rk.clear();
+        rk.resize(nc, 0);
+        let r = rings[ring];
+        for (k, w) in ord.windows(2).enumerate() {
+            let (c0, c1) = (&crosses[w[0] as usize], &crosses[w[1] as usize]);
+            let ((e0, t0), (e1, t1)) = (key(c0), key(c1));
+            if e0 == e1 {
+                let iu = e0 as usize;
+                let q = if iu + 1 == r.len() { r[0] } else { r[iu + 1] };
+                let d = q.sub(r[iu]);
+                if (t1 - t0) * (t1 - t0) * d.dot(d) < tol2 {
                     return None;
                 }
-                last = Some(exits);
             }
+            if c0.a_exits == c1.a_exits {
+                return None;
+            }
+            rk[w[1] as usize] = k as u32 + 1;
         }
     }
 
     // Trace the loops.
-    let mut visited = vec![false; crosses.len()];
+    visited.clear();
+    visited.resize(nc, false);
     let mut outer: Option<(f64, Vec<Point>)> = None;
     let mut holes_area2 = 0.0;
-    let max_steps = nodes_a.len() + nodes_b.len() + 1;
-    for start in 0..crosses.len() {
-        if visited[start] {
+    let max_steps = n + m + 2 * nc + 1;
+    for first_c in 0..nc {
+        if visited[first_c] {
             continue;
         }
-        let mut ring_pts: Vec<Point> = Vec::with_capacity(max_steps);
+        ring_pts.clear();
         // Twice the signed area by the shoelace formula, in the local frame.
-        let first = crosses[start].p;
+        let first = crosses[first_c].p;
         let mut prev = first;
         let mut a2 = 0.0;
-        let mut c = start;
+        let mut c = first_c;
         let mut steps = 0usize;
         loop {
             visited[c] = true;
@@ -459,35 +557,42 @@ pub(crate) fn union_two_simple(a: &[Point], b: &[Point]) -> Option<Vec<Vec<Point
             a2 += prev.cross(cr.p);
             prev = cr.p;
             ring_pts.push(cr.pw);
-            // Continue along the ring that leaves the other one here.
-            let ring: u8 = if cr.a_exits { 0 } else { 1 };
-            let (nodes, pos) = if ring == 0 {
-                (&nodes_a, &pos_a)
+            // Continue along the ring that leaves the other one here, up to its next crossing.
+            let ring: usize = if cr.a_exits { 0 } else { 1 };
+            let r = rings[ring];
+            let k = rank[ring][c] as usize;
+            let next = order[ring][if k + 1 == nc { 0 } else { k + 1 }] as usize;
+            let cn = &crosses[next];
+            let (e0, t0, e1, t1) = if ring == 0 {
+                (cr.ea, cr.ta, cn.ea, cn.ta)
             } else {
-                (&nodes_b, &pos_b)
+                (cr.eb, cr.tb, cn.eb, cn.tb)
             };
-            let mut k = pos[c] as usize;
-            let next = loop {
-                k = if k + 1 == nodes.len() { 0 } else { k + 1 };
-                steps += 1;
-                if steps > max_steps {
-                    return None;
-                }
-                match nodes[k] {
-                    Node::Vertex(i) => {
-                        let v = rings[ring as usize][i as usize];
-                        a2 += prev.cross(v);
-                        prev = v;
-                        ring_pts.push(orig(ring, i as usize));
-                    }
-                    Node::Cross(j) => break j as usize,
-                }
+            // The vertices after edge e0's start up to edge e1's start, around the ring when
+            // the next crossing lies behind this one.
+            let (e0, e1) = (e0 as usize, e1 as usize);
+            let count = if e1 > e0 || (e1 == e0 && t1 > t0) {
+                e1 - e0
+            } else {
+                e1 + r.len() - e0
             };
-            // Arriving along `ring`, which must enter the other ring at `next`.
-            if (crosses[next].a_exits == (ring == 0)) || (next != start && visited[next]) {
+            steps += count + 1;
+            if steps > max_steps {
                 return None;
             }
-            if next == start {
+            let mut i = e0;
+            for _ in 0..count {
+                i = if i + 1 == r.len() { 0 } else { i + 1 };
+                let v = r[i];
+                a2 += prev.cross(v);
+                prev = v;
+                ring_pts.push(orig(ring as u8, i));
+            }
+            // Arriving along `ring`, which must enter the other ring at `next`.
+            if (cn.a_exits == (ring == 0)) || (next != first_c && visited[next]) {
+                return None;
+            }
+            if next == first_c {
                 break;
             }
             c = next;
@@ -497,7 +602,7 @@ pub(crate) fn union_two_simple(a: &[Point], b: &[Point]) -> Option<Vec<Vec<Point
             if outer.is_some() {
                 return None;
             }
-            outer = Some((a2, ring_pts));
+            outer = Some((a2, ring_pts.clone()));
         } else {
             holes_area2 += a2;
         }
