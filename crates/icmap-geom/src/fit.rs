@@ -419,9 +419,18 @@ fn lsq_fit_cubic_normal(t: &[f64], x: &[[f64; 2]], des: &Design) -> Option<LsqFi
 }
 
 /// Squared residual of data point `it` for coefficients `c`.
+#[inline]
 fn residual2(c: &[Vec<f64>; 2], k: usize, des: &Design, x: &[[f64; 2]], it: usize) -> f64 {
     let l0 = des.interval[it] - k;
     let h = &des.basis[it];
+    if k == 3 {
+        // The same sums, unrolled (one bounds check per coordinate).
+        let [cx, cy] = [&c[0][l0..l0 + 4], &c[1][l0..l0 + 4]];
+        let vx = cx[0] * h[0] + cx[1] * h[1] + cx[2] * h[2] + cx[3] * h[3];
+        let vy = cy[0] * h[0] + cy[1] * h[1] + cy[2] * h[2] + cy[3] * h[3];
+        let (ex, ey) = (vx - x[it][0], vy - x[it][1]);
+        return ex * ex + ey * ey;
+    }
     (0..2)
         .map(|d| {
             let v: f64 = (0..=k).map(|i| c[d][l0 + i] * h[i]).sum();
