@@ -174,7 +174,43 @@ pub fn resample_spacing(points: &[Point], spacing: f64, closed: bool) -> Result<
     } else {
         (segments + 1).max(2)
     };
-    resample(points, n, closed)
+    Ok(resample_checked(points, n, closed, total))
+}
+
+/// [`resample`] of validated `points` (at least 2, finite) with `n` valid for `closed` and
+/// `total` = [`polyline_length`]`(points, closed)`, finite and positive: the same points as
+/// [`resample`] (the same arithmetic in the same order), without its intermediate buffers.
+fn resample_checked(points: &[Point], n: usize, closed: bool, total: f64) -> Vec<Point> {
+    let np = points.len();
+    let nseg = if closed { np } else { np - 1 };
+    let denom = if closed { n as f64 } else { (n - 1) as f64 };
+    let mut out = Vec::with_capacity(n);
+    // Segment `i` runs from `points[i]` to `points[(i + 1) % np]`, between the cumulative
+    // lengths `c0` and `c1` (accumulated as `cumulative_lengths` does).
+    let vertex = |i: usize| if i == np { points[0] } else { points[i] };
+    let mut i = 0usize;
+    let mut c0 = 0.0;
+    let mut c1 = (vertex(1) - points[0]).norm();
+    for j in 0..n {
+        let t = total * (j as f64) / denom;
+        while i + 1 < nseg && c1 < t {
+            i += 1;
+            c0 = c1;
+            c1 += (vertex(i + 1) - points[i]).norm();
+        }
+        let seg = c1 - c0;
+        let f = if seg > 0.0 {
+            ((t - c0) / seg).clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
+        out.push(points[i] + (vertex(i + 1) - points[i]) * f);
+    }
+    out[0] = points[0];
+    if !closed {
+        out[n - 1] = points[np - 1];
+    }
+    out
 }
 
 #[cfg(test)]

@@ -9,8 +9,10 @@
 //!    bounding box) is the distance under which two features count as touching: about a hundred
 //!    steps of i_overlay's integer grid (`extent / 2^30`), so that its snapping cannot change a
 //!    topology that is decided here.
-//! 2. One sweep over all edges of both rings, sorted by their smallest x, visits every pair of
-//!    edges whose bounding boxes (grown by `tol`) overlap:
+//! 2. One pass over consecutive edges of each ring rejects spikes (a neighbour folding back),
+//!    then a bucketed sweep along the long axis of the joint bounding box (edges counting-sorted
+//!    by their smallest coordinate there, a branch-free box test collecting candidates) visits
+//!    every other pair of edges whose bounding boxes (grown by `tol`) overlap:
 //!    - two edges of the same ring that are not neighbours must stay `tol` apart (the ring is
 //!      simple), two neighbours must not fold back onto each other (no spike);
 //!    - an edge of each ring: every endpoint must stay `tol` away from the other edge (no touching,
@@ -21,7 +23,7 @@
 //!    so the endpoint tests plus the crossing test decide "closer than `tol`" exactly.
 //! 3. Without crossings the rings are disjoint or one contains the other (a vertex tested by ray
 //!    casting is at least `tol` from the other boundary). With crossings, the boundary is traced
-//!    Greiner-Hormann style: the crossings are inserted into both rings in order along each edge;
+//!    Greiner-Hormann style: the crossings are ordered along both rings (by edge, then along it);
 //!    at every crossing exactly one ring leaves the other one, and the union's boundary goes on
 //!    along that ring. Every crossing lies on exactly one traced loop; the loop with positive area
 //!    is the outer ring, loops with negative area are holes (dropped, as the general path does).
@@ -190,6 +192,7 @@ struct Scratch {
     rank: [Vec<u32>; 2],
     visited: Vec<bool>,
     ring_pts: Vec<Point>,
+    keys: Vec<u128>,
 }
 
 thread_local! {
@@ -212,6 +215,7 @@ fn union_in(a: &[Point], b: &[Point], sc: &mut Scratch) -> Option<Vec<Vec<Point>
         rank,
         visited,
         ring_pts,
+        keys,
     } = sc;
     let (n, m) = (a.len(), b.len());
     if n < 3 || m < 3 || n + m > MAX_VERTICES {
@@ -376,7 +380,8 @@ fn union_in(a: &[Point], b: &[Point], sc: &mut Scratch) -> Option<Vec<Vec<Point>
     for (k, be) in sorted.iter().enumerate() {
         let end = start[bucket(be.x1) + 1] as usize;
         let mut nc = 0usize;
-        for (j, bf) in sorted.iter().enumerate().take(end).skip(k + 1) {
+        // `end > k`: a box's own bucket is at most its end's bucket.
+        for (bf, j) in sorted.get(k + 1..end).unwrap_or(&[]).iter().zip(k + 1..) {
             let keep = (bf.x0 <= be.x1)
                 & (be.x0 <= bf.x1)
                 & (bf.y0 <= be.y1)
@@ -506,13 +511,16 @@ fn union_in(a: &[Point], b: &[Point], sc: &mut Scratch) -> Option<Vec<Vec<Point>
                 (c.eb, c.tb)
             }
         };
+        // Sort keys `(edge, t, id)` packed in one integer: `t` lies in (0, 1), where the bits of
+        // a positive f64 sort as the number does.
+        keys.clear();
+        keys.extend(crosses.iter().enumerate().map(|(id, c)| {
+            let (e, t) = key(c);
+            (u128::from(e) << 96) | (u128::from(t.to_bits()) << 32) | id as u128
+        }));
+        keys.sort_unstable();
         ord.clear();
-        ord.extend(0..nc as u32);
-        ord.sort_unstable_by(|&i, &j| {
-            let (ei, ti) = key(&crosses[i as usize]);
-            let (ej, tj) = key(&crosses[j as usize]);
-            ei.cmp(&ej).then(ti.total_cmp(&tj))
-        });
+        ord.extend(keys.iter().map(|&k| k as u32));
         rk.clear();
         rk.resize(nc, 0);
         let r = rings[ring];
