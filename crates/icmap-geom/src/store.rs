@@ -13,13 +13,35 @@ use crate::types::{validate_points, MapClass, Patch, Point};
 use parry2d_f64::bounding_volume::Aabb;
 use std::collections::HashMap;
 
+/// The threads [`GlobalMap::merge_many`] shares its work with: a pool of its own, one thread fewer
+/// than rayon's global pool (the calling thread works too; `RAYON_NUM_THREADS` sets both), so
+/// that long jobs on the global pool (e.g. a big `chamfer_matrix` in another thread) never hold up
+/// a frame's merges. `None` on a single thread.
+fn merge_pool() -> Option<&'static rayon::ThreadPool> {
+    static POOL: std::sync::OnceLock<Option<rayon::ThreadPool>> = std::sync::OnceLock::new();
+    POOL.get_or_init(|| {
+        let helpers = rayon::current_num_threads().saturating_sub(1);
+        if helpers == 0 {
+            return None;
+        }
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(helpers)
+            .thread_name(|i| format!("icmap-merge-{i}"))
+            .build()
+            .ok()
+    })
+    .as_ref()
+}
+
 /// Wakes the threads that [`GlobalMap::merge_many`] shares its work with, ahead of a call: a
 /// sleeping thread takes tens of microseconds to wake, a good part of a frame's merges, so a
 /// caller that first converts its input (the Python binding) starts the wake-up before. Optional;
 /// without it the merges start on the calling thread and the others join when awake.
 pub fn wake_merge_workers() {
-    for _ in 1..rayon::current_num_threads() {
-        rayon::spawn(|| ());
+    if let Some(pool) = merge_pool() {
+        for _ in 0..pool.current_num_threads() {
+            pool.spawn(|| ());
+        }
     }
 }
 
@@ -372,7 +394,7 @@ impl GlobalMap {
     /// Merges many detections at `frame`: `items[i] = (id, points)`. The result is exactly that of
     /// calling [`Self::merge`] on each item in order (items for the same instance are applied in
     /// their order, each to the result of the previous one); the merges of different instances
-    /// are computed in parallel (rayon's pool) and then committed. Returns one result per item:
+    /// are computed in parallel (a pool of their own) and then committed. Returns one result per item:
     /// an item that fails (unknown id, bad geometry) leaves the instance as the items before it
     /// made it, and does not affect the others.
     pub fn merge_many(&mut self, items: &[(u64, &[Point])], frame: i64) -> Vec<Result<()>> {
@@ -421,8 +443,8 @@ impl GlobalMap {
             }
             (current, merged, errs)
         };
-        // The calling thread works through the groups (largest first) and rayon's other threads
-        // join in as they wake up, taking the next group from a shared counter: no wait for a
+        // The calling thread works through the groups (largest first) and the merge pool's
+        // threads join in as they wake up, taking the next group from a shared counter: no wait for a
         // pool wake-up before the first merge (which costs as much as several merges).
         let mut order: Vec<usize> = (0..groups.len()).collect();
         let cost = |g: usize| -> usize {
@@ -441,19 +463,15 @@ impl GlobalMap {
             let Some(&g) = order.get(k) else { break };
             let _ = done[g].set(outcome(&groups[g]));
         };
-        let helpers = if groups.len() >= 4 {
-            rayon::current_num_threads()
-                .saturating_sub(1)
-                .min(groups.len() - 1)
-        } else {
-            0
-        };
-        rayon::in_place_scope(|scope| {
-            for _ in 0..helpers {
-                scope.spawn(|_| work());
-            }
-            work();
-        });
+        match merge_pool().filter(|_| groups.len() >= 4) {
+            Some(pool) => pool.in_place_scope(|scope| {
+                for _ in 0..pool.current_num_threads().min(groups.len() - 1) {
+                    scope.spawn(|_| work());
+                }
+                work();
+            }),
+            None => work(),
+        }
         // (Every group is done once the scope ends; one left undone would be computed here.)
         let outcomes: Vec<GroupOutcome> = done
             .into_iter()
