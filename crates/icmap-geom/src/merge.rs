@@ -52,6 +52,8 @@ struct Projector<'a> {
     /// Per block of [`BLOCK`] consecutive segments (short polylines only): the centre and the
     /// half diagonal of its vertices' bounding box (every point of the block lies that near).
     blocks: Option<Vec<[f64; 3]>>,
+    /// `1 / len^2` per segment (the same value the exact test would compute).
+    inv_len2: Vec<f64>,
 }
 
 /// Polylines with at most this many segments are projected onto by the block test.
@@ -87,6 +89,13 @@ impl<'a> Projector<'a> {
             hint: 0,
             slack: 1e-9 * (1.0 + scale),
             blocks,
+            inv_len2: cum
+                .windows(2)
+                .map(|w| {
+                    let len = w[1] - w[0];
+                    1.0 / (len * len)
+                })
+                .collect(),
         }
     }
 
@@ -101,7 +110,7 @@ impl<'a> Projector<'a> {
         if len <= 0.0 {
             return None;
         }
-        let t_raw = (p - g[i]).dot(&d) * (1.0 / (len * len));
+        let t_raw = (p - g[i]).dot(&d) * self.inv_len2[i];
         let t = t_raw.clamp(0.0, 1.0);
         let dist2 = (p - (g[i] + d * t)).norm_squared();
         let t_ext = if (i == 0 && t_raw < 0.0) || (i == nseg - 1 && t_raw > 1.0) {
@@ -121,7 +130,7 @@ impl<'a> Projector<'a> {
         if len <= 0.0 {
             return None;
         }
-        let t_raw = (p - g[i]).dot(&d) * (1.0 / (len * len));
+        let t_raw = (p - g[i]).dot(&d) * self.inv_len2[i];
         let t = t_raw.clamp(0.0, 1.0);
         Some((p - (g[i] + d * t)).norm_squared())
     }
@@ -144,10 +153,12 @@ impl<'a> Projector<'a> {
         // The previous query's segment gives a first bound; a block whose bounding circle lies
         // farther than the best distance so far (plus a rounding slack) cannot hold a nearer point.
         let hint = self.hint.min(nseg - 1);
-        let mut best = self.dist2(hint, p);
-        let mut best_i = if best.is_some() { hint } else { usize::MAX };
+        // best: (squared distance, segment); reach: its distance plus the slack (no segment
+        // beyond reach + a block's radius from the block's centre can be nearer).
+        let mut best = self.dist2(hint, p).map(|d2| (d2, hint));
+        let mut reach = best.map_or(f64::INFINITY, |(d2, _)| d2.sqrt() + self.slack);
         for (b, &[cx, cy, radius]) in blocks.iter().enumerate() {
-            let bound = best.map_or(f64::INFINITY, |d2| d2.sqrt() + self.slack) + radius;
+            let bound = reach + radius;
             let (ex, ey) = (p.x - cx, p.y - cy);
             if ex * ex + ey * ey > bound * bound {
                 continue;
@@ -156,21 +167,20 @@ impl<'a> Projector<'a> {
                 if i == hint {
                     continue;
                 }
-                if let Some(d2) = self.dist2(i, p) {
-                    let better = match best {
-                        None => true,
-                        Some(bd) => d2 < bd || (d2 == bd && i < best_i),
-                    };
-                    if better {
-                        best = Some(d2);
-                        best_i = i;
-                    }
+                let Some(d2) = self.dist2(i, p) else { continue };
+                let better = match best {
+                    None => true,
+                    Some((bd, bi)) => d2 < bd || (d2 == bd && i < bi),
+                };
+                if better {
+                    best = Some((d2, i));
+                    reach = d2.sqrt() + self.slack;
                 }
             }
         }
-        match best.and_then(|_| self.segment(best_i, p)) {
-            Some((_, s, tangent)) => {
-                self.hint = best_i;
+        match best.and_then(|(_, i)| self.segment(i, p).map(|c| (c, i))) {
+            Some(((_, s, tangent), i)) => {
+                self.hint = i;
                 (s, tangent)
             }
             None => (0.0, Vector2::new(1.0, 0.0)),
