@@ -353,13 +353,20 @@ fn lsq_fit_cubic_normal(t: &[f64], x: &[[f64; 2]], des: &Design) -> Option<LsqFi
     for ((h, xy), &l) in des.basis.iter().zip(x).zip(&des.interval) {
         let j0 = l - 3;
         let v = [xy[0] - origin[0], xy[1] - origin[1]];
+        // The 10 products of the 4 x 4 block, unrolled (one bounds check per slice).
+        let rows = &mut a[j0..j0 + K1];
         for i in 0..K1 {
-            let row = &mut a[j0 + i];
+            let hi = h[i];
+            let row = &mut rows[i];
             for j in i..K1 {
-                row[j - i] += h[i] * h[j];
+                row[j - i] += hi * h[j];
             }
-            rhs[0][j0 + i] += h[i] * v[0];
-            rhs[1][j0 + i] += h[i] * v[1];
+        }
+        let [rx, ry] = &mut rhs;
+        let (rx, ry) = (&mut rx[j0..j0 + K1], &mut ry[j0..j0 + K1]);
+        for i in 0..K1 {
+            rx[i] += h[i] * v[0];
+            ry[i] += h[i] * v[1];
         }
     }
     // Banded Cholesky A = R^T R; r[i][j] = R(i, i + j).
