@@ -69,11 +69,67 @@ pub fn polygon_union(rings: &[Vec<Point>]) -> Result<Vec<Vec<Point>>> {
         }
     }
     if let [a, b] = rings {
-        if let Some(out) = crate::union_fast::union_two_simple(open_ring(a), open_ring(b)) {
+        let (a, b) = (open_ring(a), open_ring(b));
+        if let Some(out) = crate::union_fast::union_two_simple(a, b) {
             return Ok(out);
         }
+        return Ok(union_two_resolved(a, b));
     }
     Ok(overlay_union(rings))
+}
+
+/// The exterior of a polygon without its repeated closing point.
+fn exterior_points(poly: &Polygon<f64>) -> Vec<Point> {
+    let mut ring: Vec<Point> = poly
+        .exterior()
+        .0
+        .iter()
+        .map(|c| Point::new(c.x, c.y))
+        .collect();
+    if ring.len() >= 2 && ring[0] == ring[ring.len() - 1] {
+        ring.pop();
+    }
+    ring
+}
+
+/// Two rings that the fast path declined. A ring that is not clearly simple
+/// ([`ring_is_simple`](crate::union_fast::ring_is_simple)) is resolved alone by the overlay, as
+/// the general path does first; when that gives one polygon without holes, the fast path gets a
+/// second try on the simple ring and the resolved one (it decides by itself whether the pair is
+/// in general position). Otherwise the general path goes on from the resolved rings (computed
+/// once), giving exactly what [`overlay_union`] gives.
+fn union_two_resolved(a: &[Point], b: &[Point]) -> Vec<Vec<Point>> {
+    let resolved: [Option<Vec<Polygon<f64>>>; 2] = [a, b].map(|r| {
+        (!crate::union_fast::ring_is_simple(r))
+            .then(|| geo::unary_union(std::iter::once(&to_polygon(r))).0)
+    });
+    if resolved.iter().any(Option::is_some) {
+        let one_ring = |r: &[Point], res: &Option<Vec<Polygon<f64>>>| match res {
+            None => Some(r.to_vec()),
+            Some(polys) => match polys.as_slice() {
+                [p] if p.interiors().is_empty() => Some(exterior_points(p)),
+                _ => None,
+            },
+        };
+        if let (Some(ra), Some(rb)) = (one_ring(a, &resolved[0]), one_ring(b, &resolved[1])) {
+            if let Some(out) = crate::union_fast::union_two_simple(&ra, &rb) {
+                return out;
+            }
+        }
+    }
+    let [res_a, res_b] = resolved;
+    let polys = [(a, res_a), (b, res_b)]
+        .into_iter()
+        .flat_map(|(r, res)| res.unwrap_or_else(|| resolve_ring(r)))
+        .collect();
+    union_of_resolved(polys)
+}
+
+/// A ring resolved into simple polygons alone: geo's `unary_union` of the ring. (Taking a clearly
+/// simple ring as it is would skip an overlay, but the result is snapped twice to different grids
+/// and then differs from this one by a grid step, sometimes starting at another vertex.)
+fn resolve_ring(ring: &[Point]) -> Vec<Polygon<f64>> {
+    geo::unary_union(std::iter::once(&to_polygon(ring))).0
 }
 
 /// The general path of [`polygon_union`] (validated input): geo's overlay.
@@ -82,20 +138,17 @@ fn overlay_union(rings: &[Vec<Point>]) -> Vec<Vec<Point>> {
     // orientation would otherwise cancel the other rings' winding numbers in the joint overlay).
     let polys: Vec<Polygon<f64>> = rings
         .iter()
-        .flat_map(|r| geo::unary_union(std::iter::once(&to_polygon(open_ring(r)))).0)
+        .flat_map(|r| resolve_ring(open_ring(r)))
         .collect();
+    union_of_resolved(polys)
+}
+
+/// The pairwise union of resolved polygons, as [`polygon_union`] returns it.
+fn union_of_resolved(polys: Vec<Polygon<f64>>) -> Vec<Vec<Point>> {
     let union = balanced_union(polys.into_iter().map(|p| MultiPolygon(vec![p])).collect());
     let mut out: Vec<(f64, Vec<Point>)> = Vec::new();
     for poly in union.0 {
-        let mut ring: Vec<Point> = poly
-            .exterior()
-            .0
-            .iter()
-            .map(|c| Point::new(c.x, c.y))
-            .collect();
-        if ring.len() >= 2 && ring[0] == ring[ring.len() - 1] {
-            ring.pop();
-        }
+        let mut ring = exterior_points(&poly);
         ring.dedup();
         if ring.len() < 3 {
             continue;
