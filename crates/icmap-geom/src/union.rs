@@ -94,27 +94,20 @@ fn exterior_points(poly: &Polygon<f64>) -> Vec<Point> {
 
 /// Two rings that the fast path declined. A ring that is not clearly simple
 /// ([`ring_is_simple`](crate::union_fast::ring_is_simple)) is resolved alone by the overlay, as
-/// the general path does first; when that gives one polygon without holes, the fast path gets a
-/// second try on the simple ring and the resolved one (it decides by itself whether the pair is
-/// in general position). Otherwise the general path goes on from the resolved rings (computed
-/// once), giving exactly what [`overlay_union`] gives.
+/// the general path does first. When every resolved piece is a polygon without holes, the fast
+/// path gets a second try: the pieces (and the simple ring) are added one at a time, largest
+/// first, each step required to give one polygon without holes (so that no piece could fall into
+/// a dropped hole); the fast path decides by itself whether each pair is in general position.
+/// Otherwise the general path goes on from the resolved rings (computed once), giving exactly
+/// what [`overlay_union`] gives.
 fn union_two_resolved(a: &[Point], b: &[Point]) -> Vec<Vec<Point>> {
     let resolved: [Option<Vec<Polygon<f64>>>; 2] = [a, b].map(|r| {
         (!crate::union_fast::ring_is_simple(r))
             .then(|| geo::unary_union(std::iter::once(&to_polygon(r))).0)
     });
     if resolved.iter().any(Option::is_some) {
-        let one_ring = |r: &[Point], res: &Option<Vec<Polygon<f64>>>| match res {
-            None => Some(r.to_vec()),
-            Some(polys) => match polys.as_slice() {
-                [p] if p.interiors().is_empty() => Some(exterior_points(p)),
-                _ => None,
-            },
-        };
-        if let (Some(ra), Some(rb)) = (one_ring(a, &resolved[0]), one_ring(b, &resolved[1])) {
-            if let Some(out) = crate::union_fast::union_two_simple(&ra, &rb) {
-                return out;
-            }
+        if let Some(out) = union_pieces(a, b, &resolved) {
+            return vec![out];
         }
     }
     let [res_a, res_b] = resolved;
@@ -123,6 +116,39 @@ fn union_two_resolved(a: &[Point], b: &[Point]) -> Vec<Vec<Point>> {
         .flat_map(|(r, res)| res.unwrap_or_else(|| resolve_ring(r)))
         .collect();
     union_of_resolved(polys)
+}
+
+/// The second try of [`union_two_resolved`]: the union as one ring, or `None` when any step is
+/// not certain.
+fn union_pieces(
+    a: &[Point],
+    b: &[Point],
+    resolved: &[Option<Vec<Polygon<f64>>>; 2],
+) -> Option<Vec<Point>> {
+    let mut pieces: Vec<(f64, Vec<Point>)> = Vec::new();
+    for (r, res) in [(a, &resolved[0]), (b, &resolved[1])] {
+        match res {
+            None => pieces.push((signed_area2(r).abs(), r.to_vec())),
+            Some(polys) => {
+                for p in polys {
+                    if !p.interiors().is_empty() {
+                        return None;
+                    }
+                    let ring = exterior_points(p);
+                    pieces.push((signed_area2(&ring).abs(), ring));
+                }
+            }
+        }
+    }
+    pieces.sort_by(|x, y| y.0.total_cmp(&x.0));
+    let mut it = pieces.into_iter().map(|(_, r)| r);
+    let first = it.next()?;
+    // At least one step (its output follows the overlay's conventions: start vertex, runs).
+    let mut acc = crate::union_fast::union_two_simple_solid(&first, &it.next()?)?;
+    for piece in it {
+        acc = crate::union_fast::union_two_simple_solid(&acc, &piece)?;
+    }
+    Some(acc)
 }
 
 /// A ring resolved into simple polygons alone: geo's `unary_union` of the ring. (Taking a clearly
@@ -648,6 +674,112 @@ mod tests {
         let u = polygon_union(&[g, d]).unwrap();
         assert_eq!(u.len(), 1);
         assert!(area(&u[0]) > 8.0);
+    }
+
+    /// A self-crossing detection over a simple global ring: the detection is resolved alone and
+    /// its pieces go through the fast path (second try), agreeing with the overlay.
+    #[test]
+    fn self_crossing_detection_second_try_matches_overlay() {
+        let g = rect(0.0, 0.0, 4.0, 2.0);
+        // A bowtie crossing itself at (2.1, 1.05), inside g; its lobes stick out of g.
+        let d = vec![p(1.0, -1.0), p(3.2, 3.1), p(3.3, -0.9), p(1.1, 3.2)];
+        assert!(crate::union_fast::ring_is_simple(&g));
+        assert!(!crate::union_fast::ring_is_simple(&d));
+        assert!(crate::union_fast::union_two_simple(&g, &d).is_none());
+        let resolved = [None, Some(resolve_ring(&d))];
+        assert!(resolved[1].as_ref().is_some_and(|r| !r.is_empty()));
+        let second = union_pieces(&g, &d, &resolved).expect("second try taken");
+        let slow = overlay_union(&[g.clone(), d.clone()]);
+        assert_eq!(slow.len(), 1);
+        assert!((area(&second) - area(&slow[0])).abs() < 1e-9);
+        assert!(area(&second) > 8.0);
+        assert_eq!(polygon_union(&[g, d]).unwrap(), vec![second.clone()]);
+        let rf = crate::resample::resample_spacing(&second, 1.0, true).unwrap();
+        let rs = crate::resample::resample_spacing(&slow[0], 1.0, true).unwrap();
+        assert_eq!(rf.len(), rs.len());
+        assert!(rf.iter().zip(&rs).all(|(x, y)| (x - y).norm() < 1e-6));
+    }
+
+    /// The second try declines when a step's union has a hole (a later piece could be an island
+    /// in it, which the overlay keeps as a separate polygon), and with a single piece.
+    #[test]
+    fn second_try_declines_holes_and_single_pieces() {
+        let c = vec![
+            p(0.0, 0.0),
+            p(6.0, 0.0),
+            p(6.0, 6.0),
+            p(0.0, 6.0),
+            p(0.0, 4.0),
+            p(4.0, 4.0),
+            p(4.0, 2.0),
+            p(0.0, 2.0),
+        ];
+        let bar = rect(-1.0, 1.0, 2.0, 5.0);
+        assert!(crate::union_fast::union_two_simple(&c, &bar).is_some());
+        assert!(crate::union_fast::union_two_simple_solid(&c, &bar).is_none());
+        // An island in that hole: two polygons from the overlay, never one ring.
+        let island = vec![p(2.5, 2.9), p(3.0, 3.1), p(2.8, 3.3)];
+        let u = overlay_union(&[c.clone(), bar.clone(), island]);
+        assert_eq!(u.len(), 2);
+        // A resolved ring with zero area leaves one piece: no step, no second try.
+        let flat = vec![p(1.0, 1.0), p(2.0, 2.0), p(3.0, 3.0), p(2.0, 2.0)];
+        let resolved = [None, Some(resolve_ring(&flat))];
+        assert!(union_pieces(&c, &flat, &resolved).is_none());
+    }
+
+    /// A ring that `ring_is_simple` accepts resolves to itself: the overlay's `unary_union` gives
+    /// one polygon without holes, with the same area and the same vertices up to its grid; the
+    /// bowtie, a spike and a ring touching itself are refused.
+    #[test]
+    fn simple_rings_resolve_to_themselves() {
+        for seed in 0..60u64 {
+            let mut rng = Rng(seed);
+            let g = global_ring((seed % 3) as u8, &mut rng);
+            let d = detection(&g, &mut rng, 0.9, 0.3, 0.05);
+            for r in [g, d] {
+                if !crate::union_fast::ring_is_simple(&r) {
+                    continue;
+                }
+                let res = resolve_ring(&r);
+                assert_eq!(res.len(), 1);
+                assert!(res[0].interiors().is_empty());
+                let e = exterior_points(&res[0]);
+                assert!(
+                    (area(&e)
+                        - area(
+                            &to_polygon(&r)
+                                .exterior()
+                                .0
+                                .iter()
+                                .map(|c| p(c.x, c.y))
+                                .collect::<Vec<_>>()
+                        ))
+                    .abs()
+                        < 1e-6
+                );
+                assert!(e.iter().all(|q| r.iter().any(|v| (v - q).norm() < 1e-6)));
+            }
+        }
+        let bowtie = vec![p(0.0, 0.0), p(1.0, 1.0), p(1.0, 0.0), p(0.0, 1.0)];
+        assert!(!crate::union_fast::ring_is_simple(&bowtie));
+        let spike = vec![
+            p(0.0, 0.0),
+            p(2.0, 0.0),
+            p(2.0, 1.0),
+            p(1.0, 1.0),
+            p(1.0, 3.0),
+            p(1.0, 1.0 + 1e-3),
+        ];
+        assert!(!crate::union_fast::ring_is_simple(&spike));
+        let touching = vec![
+            p(0.0, 0.0),
+            p(4.0, 0.0),
+            p(4.0, 2.0),
+            p(2.0, 0.0),
+            p(0.0, 2.0),
+        ];
+        assert!(!crate::union_fast::ring_is_simple(&touching));
+        assert!(crate::union_fast::ring_is_simple(&rect(0.0, 0.0, 2.0, 1.0)));
     }
 
     proptest! {

@@ -168,9 +168,24 @@ struct Cross {
 /// the caller to use the general overlay. Outer rings counter-clockwise, largest area first,
 /// holes dropped, each starting at the predecessor of its smallest `(x, y)` (module doc, step 4).
 pub(crate) fn union_two_simple(a: &[Point], b: &[Point]) -> Option<Vec<Vec<Point>>> {
+    with_scratch(|sc| union_in(a, b, sc, true))
+}
+
+/// [`union_two_simple`] when the union is one polygon without holes (its outer ring); `None`
+/// also when the union falls apart or has a hole (a later piece could sit in that hole).
+pub(crate) fn union_two_simple_solid(a: &[Point], b: &[Point]) -> Option<Vec<Point>> {
+    let mut out = with_scratch(|sc| union_in(a, b, sc, false))?;
+    if out.len() == 1 {
+        out.pop()
+    } else {
+        None
+    }
+}
+
+fn with_scratch<T>(f: impl FnOnce(&mut Scratch) -> T) -> T {
     SCRATCH.with(|sc| match sc.try_borrow_mut() {
-        Ok(mut sc) => union_in(a, b, &mut sc),
-        Err(_) => union_in(a, b, &mut Scratch::default()),
+        Ok(mut sc) => f(&mut sc),
+        Err(_) => f(&mut Scratch::default()),
     })
 }
 
@@ -200,7 +215,8 @@ thread_local! {
 }
 
 /// [`union_two_simple`] with the given working buffers.
-fn union_in(a: &[Point], b: &[Point], sc: &mut Scratch) -> Option<Vec<Vec<Point>>> {
+/// `holes_ok`: whether a union with holes is accepted (they are dropped).
+fn union_in(a: &[Point], b: &[Point], sc: &mut Scratch, holes_ok: bool) -> Option<Vec<Vec<Point>>> {
     let Scratch {
         ra,
         rb,
@@ -611,8 +627,10 @@ fn union_in(a: &[Point], b: &[Point], sc: &mut Scratch) -> Option<Vec<Vec<Point>
                 return None;
             }
             outer = Some((a2, ring_pts.clone()));
-        } else {
+        } else if holes_ok {
             holes_area2 += a2;
+        } else {
+            return None;
         }
     }
     let (outer_area2, outer) = outer?;
