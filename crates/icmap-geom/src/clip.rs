@@ -61,6 +61,28 @@ fn flush(cur: &mut Vec<Point>, pieces: &mut Vec<Vec<Point>>) {
 /// are returned unchanged. Segments with a non-finite end point are treated as outside.
 pub fn clip_polyline(points: &[Point], patch: &Patch) -> Vec<Vec<Point>> {
     let (hx, hy) = (patch.half_extents.x, patch.half_extents.y);
+    let iso = patch.pose.isometry();
+    // Every vertex inside (the common case for a patch with a margin): Liang-Barsky keeps every
+    // segment whole (t0 = 0, t1 = 1 exactly), so the one piece is the polyline itself.
+    if points.len() >= 2
+        && points.iter().all(|p| {
+            let e = iso.inverse_transform_point(p);
+            e.x.abs() <= hx && e.y.abs() <= hy
+        })
+    {
+        let mut pieces = Vec::new();
+        flush(&mut points.to_vec(), &mut pieces);
+        return pieces;
+    }
+    clip_polyline_by_segments(points, patch)
+}
+
+/// [`clip_polyline`] segment by segment (Liang-Barsky), without the all-inside shortcut.
+fn clip_polyline_by_segments(points: &[Point], patch: &Patch) -> Vec<Vec<Point>> {
+    let (hx, hy) = (patch.half_extents.x, patch.half_extents.y);
+    // The pose's rotation once (`Pose2::to_ego` would evaluate sin/cos for every point).
+    let iso = patch.pose.isometry();
+    let to_ego = |p: &Point| iso.inverse_transform_point(p);
     let mut pieces = Vec::new();
     let mut cur: Vec<Point> = Vec::new();
     let mut prev_ego: Option<Point> = None;
@@ -73,9 +95,9 @@ pub fn clip_polyline(points: &[Point], patch: &Patch) -> Vec<Vec<Point>> {
         }
         let ae = match prev_ego {
             Some(e) if i > 0 => e,
-            _ => patch.pose.to_ego(&a),
+            _ => to_ego(&a),
         };
-        let be = patch.pose.to_ego(&b);
+        let be = to_ego(&b);
         prev_ego = Some(be);
         match liang_barsky(&ae, &be, hx, hy) {
             None => flush(&mut cur, &mut pieces),
@@ -113,6 +135,12 @@ pub(crate) fn signed_area2(ring: &[Point]) -> f64 {
 /// the ring lies outside the patch, when the clipped ring has no area, or when the ring has fewer
 /// than 3 points or a non-finite coordinate.
 pub fn clip_polygon(ring: &[Point], patch: &Patch) -> Vec<Point> {
+    clip_polygon_impl(ring, patch, true)
+}
+
+/// [`clip_polygon`]; `shortcut`: skip the clip edges when every vertex is inside (they would keep
+/// the ring as it is).
+fn clip_polygon_impl(ring: &[Point], patch: &Patch, shortcut: bool) -> Vec<Point> {
     let mut ring = ring;
     if ring.len() >= 2 && ring[0] == ring[ring.len() - 1] {
         ring = &ring[..ring.len() - 1];
@@ -122,7 +150,11 @@ pub fn clip_polygon(ring: &[Point], patch: &Patch) -> Vec<Point> {
     }
     let (hx, hy) = (patch.half_extents.x, patch.half_extents.y);
     // (world, ego) pairs.
-    let mut poly: Vec<(Point, Point)> = ring.iter().map(|p| (*p, patch.pose.to_ego(p))).collect();
+    let iso = patch.pose.isometry();
+    let mut poly: Vec<(Point, Point)> = ring
+        .iter()
+        .map(|p| (*p, iso.inverse_transform_point(p)))
+        .collect();
     // Each clip edge: signed distance inside (>= 0 inside) as a function of the ego point.
     let edges: [fn(&Point, f64, f64) -> f64; 4] = [
         |e, hx, _| hx - e.x,
@@ -130,8 +162,10 @@ pub fn clip_polygon(ring: &[Point], patch: &Patch) -> Vec<Point> {
         |e, _, hy| hy - e.y,
         |e, _, hy| e.y + hy,
     ];
+    // Every vertex inside: each clip edge keeps the ring as it is.
+    let all_inside = shortcut && poly.iter().all(|(_, e)| e.x.abs() <= hx && e.y.abs() <= hy);
     for f in edges {
-        if poly.is_empty() {
+        if poly.is_empty() || all_inside {
             break;
         }
         let n = poly.len();
@@ -507,6 +541,20 @@ mod tests {
             let ring = clip_polygon(&pts, &patch);
             prop_assert!(ring.is_empty() || ring.len() >= 3);
             prop_assert!(ring.iter().all(|q| inside_tol(&patch, q)));
+        }
+
+        #[test]
+        fn prop_inside_shortcut_is_exact(
+            v in prop::collection::vec((-1.2f64..1.2, -1.2f64..1.2), 0..20),
+            snap in any::<bool>(),
+            yaw in prop::sample::select(vec![0.0, 0.7, std::f64::consts::FRAC_PI_2]),
+        ) {
+            // Vertices inside, outside and (snapped) exactly on the boundary of a 1 x 1 patch.
+            let s = |t: f64| if snap { (t * 4.0).round() / 4.0 } else { t };
+            let pts: Vec<Point> = v.iter().map(|&(x, y)| p(s(x), s(y))).collect();
+            let patch = Patch::new(Pose2::new(0.0, 0.0, yaw).unwrap(), 1.0, 1.0, 0.0).unwrap();
+            prop_assert_eq!(clip_polyline(&pts, &patch), clip_polyline_by_segments(&pts, &patch));
+            prop_assert_eq!(clip_polygon(&pts, &patch), clip_polygon_impl(&pts, &patch, false));
         }
 
         #[test]
