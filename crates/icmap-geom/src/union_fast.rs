@@ -743,7 +743,8 @@ pub(crate) fn ring_is_simple(ring: &[Point]) -> bool {
     }
     let tol = REL_TOL * extent;
     let tol2 = tol * tol;
-    if !(area2(&r).abs() > tol * extent) {
+    let a2 = area2(&r).abs();
+    if a2.is_nan() || a2 <= tol * extent {
         return false;
     }
     let nx = |i: usize| if i + 1 == k { 0 } else { i + 1 };
