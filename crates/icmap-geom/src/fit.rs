@@ -72,40 +72,17 @@ impl SplineCurve {
 /// FITPACK's `fpbspl`); entry `i` belongs to coefficient `l - k + i`.
 #[inline]
 fn bspline_basis(t: &[f64], k: usize, x: f64, l: usize) -> [f64; 6] {
-    // The same recurrence with the degree known at compile time (unrolled) for the common cubic
-    // and quadratic cases; the arithmetic, and so the result, is identical.
+    // The common cubic and quadratic cases with the degree a constant (the recurrence unrolled
+    // by the compiler); the arithmetic, and so the result, is the same.
     match k {
-        3 => basis_of_degree::<3>(t, x, l),
-        2 => basis_of_degree::<2>(t, x, l),
-        _ => basis_of_degree_dyn(t, k, x, l),
+        3 => basis_recurrence(t, 3, x, l),
+        2 => basis_recurrence(t, 2, x, l),
+        _ => basis_recurrence(t, k, x, l),
     }
 }
 
 #[inline(always)]
-fn basis_of_degree<const K: usize>(t: &[f64], x: f64, l: usize) -> [f64; 6] {
-    let mut h = [0.0; 6];
-    let mut hh = [0.0; 6];
-    h[0] = 1.0;
-    for j in 1..=K {
-        hh[..j].copy_from_slice(&h[..j]);
-        h[0] = 0.0;
-        for i in 1..=j {
-            let li = l + i;
-            let lj = li - j;
-            let (tli, tlj) = (t[li], t[lj]);
-            if tli == tlj {
-                h[i] = 0.0;
-                continue;
-            }
-            let f = hh[i - 1] / (tli - tlj);
-            h[i - 1] += f * (tli - x);
-            h[i] = f * (x - tlj);
-        }
-    }
-    h
-}
-
-fn basis_of_degree_dyn(t: &[f64], k: usize, x: f64, l: usize) -> [f64; 6] {
+fn basis_recurrence(t: &[f64], k: usize, x: f64, l: usize) -> [f64; 6] {
     let mut h = [0.0; 6];
     let mut hh = [0.0; 6];
     h[0] = 1.0;
