@@ -83,6 +83,25 @@ impl V {
     }
 }
 
+/// The larger side of the points' bounding box and whether it is the x side; `None` when it is
+/// not finite and positive.
+fn extent_of<'a>(points: impl Iterator<Item = &'a V>) -> Option<(f64, bool)> {
+    let (mut x0, mut x1, mut y0, mut y1) = (
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+    );
+    for p in points {
+        x0 = x0.min(p.x);
+        x1 = x1.max(p.x);
+        y0 = y0.min(p.y);
+        y1 = y1.max(p.y);
+    }
+    let extent = (x1 - x0).max(y1 - y0);
+    (extent.is_finite() && extent > 0.0).then_some((extent, x1 - x0 >= y1 - y0))
+}
+
 /// Twice the signed area of a ring.
 fn area2(r: &[V]) -> f64 {
     let Some(&last) = r.last() else {
@@ -246,22 +265,7 @@ fn union_in(a: &[Point], b: &[Point], sc: &mut Scratch, holes_ok: bool) -> Optio
     ra.extend(a.iter().map(to_local));
     rb.clear();
     rb.extend(b.iter().map(to_local));
-    let (mut x0, mut x1, mut y0, mut y1) = (
-        f64::INFINITY,
-        f64::NEG_INFINITY,
-        f64::INFINITY,
-        f64::NEG_INFINITY,
-    );
-    for p in ra.iter().chain(rb.iter()) {
-        x0 = x0.min(p.x);
-        x1 = x1.max(p.x);
-        y0 = y0.min(p.y);
-        y1 = y1.max(p.y);
-    }
-    let extent = (x1 - x0).max(y1 - y0);
-    if !(extent.is_finite() && extent > 0.0) {
-        return None;
-    }
+    let (extent, along_x) = extent_of(ra.iter().chain(rb.iter()))?;
     let tol = REL_TOL * extent;
     let tol2 = tol * tol;
 
@@ -295,7 +299,6 @@ fn union_in(a: &[Point], b: &[Point], sc: &mut Scratch, holes_ok: bool) -> Optio
 
     // Edges, no edge shorter than tol. The sweep runs along the longer side of the bounding box
     // (a crossing is long and thin: across it, every edge would overlap every other one).
-    let along_x = x1 - x0 >= y1 - y0;
     let sweep = |p: V| if along_x { p.x } else { p.y };
     let across = |p: V| if along_x { p.y } else { p.x };
     edges.clear();
@@ -725,22 +728,9 @@ pub(crate) fn ring_is_simple(ring: &[Point]) -> bool {
             y: p.y - o.y,
         })
         .collect();
-    let (mut x0, mut x1, mut y0, mut y1) = (
-        f64::INFINITY,
-        f64::NEG_INFINITY,
-        f64::INFINITY,
-        f64::NEG_INFINITY,
-    );
-    for p in &r {
-        x0 = x0.min(p.x);
-        x1 = x1.max(p.x);
-        y0 = y0.min(p.y);
-        y1 = y1.max(p.y);
-    }
-    let extent = (x1 - x0).max(y1 - y0);
-    if !(extent.is_finite() && extent > 0.0) {
+    let Some((extent, _)) = extent_of(r.iter()) else {
         return false;
-    }
+    };
     let tol = REL_TOL * extent;
     let tol2 = tol * tol;
     let a2 = area2(&r).abs();
