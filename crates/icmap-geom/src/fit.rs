@@ -193,6 +193,23 @@ fn design(t: &[f64], k: usize, u: &[f64]) -> Design {
     let mut l = k;
     let mut interval = Vec::with_capacity(u.len());
     let mut basis = Vec::with_capacity(u.len());
+    if k == 3 && t.len() == 8 && t[..4] == [0.0; 4] && t[4..] == [1.0; 4] {
+        // No interior knots (FITPACK's first fit, and most merges): the cubic B-splines on
+        // [0, 1] are the Bernstein polynomials.
+        for &x in u {
+            let y = 1.0 - x;
+            interval.push(3);
+            basis.push([
+                y * y * y,
+                3.0 * x * y * y,
+                3.0 * x * x * y,
+                x * x * x,
+                0.0,
+                0.0,
+            ]);
+        }
+        return Design { interval, basis };
+    }
     if k == 3 {
         // The cubic recurrence with the knot-difference reciprocals of the current interval
         // computed once per interval (data points share intervals).
