@@ -15,7 +15,7 @@
 //! The fitted curve is then evaluated about `spacing` apart by arc length.
 
 use crate::error::{GeomError, Result};
-use crate::resample::{cumulative_lengths, dedup, polyline_length, MAX_RESAMPLE_POINTS};
+use crate::resample::{cumulative_lengths, dedup, MAX_RESAMPLE_POINTS};
 use crate::types::{validate_points, Point};
 
 /// FITPACK's relative tolerance on `fp = s` (parcur's `tol`).
@@ -569,7 +569,9 @@ pub fn fit_spline(points: &[Point], s: f64) -> Result<SplineCurve> {
         });
     }
     let pts = dedup(points, DEDUP_EPS, false);
-    let total = polyline_length(&pts, false);
+    // (The last cumulative length is the polyline's length: the same sums in the same order.)
+    let cum = cumulative_lengths(&pts);
+    let total = cum[cum.len() - 1];
     if !total.is_finite() {
         return Err(GeomError::NonFinite {
             what: "curve length (coordinates too large)".into(),
@@ -583,7 +585,6 @@ pub fn fit_spline(points: &[Point], s: f64) -> Result<SplineCurve> {
     }
     let m = pts.len();
     let k = 3.min(m - 1);
-    let cum = cumulative_lengths(&pts);
     let mut u: Vec<f64> = cum.iter().map(|c| c / total).collect();
     u[m - 1] = 1.0;
     let x: Vec<[f64; 2]> = pts.iter().map(|p| [p.x, p.y]).collect();
@@ -1252,6 +1253,7 @@ fn arc_length_samples(curve: &SplineCurve, spacing: f64) -> Result<(Vec<Span>, V
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::resample::polyline_length;
     use proptest::prelude::*;
 
     fn p(x: f64, y: f64) -> Point {
