@@ -420,7 +420,7 @@ fn lsq_fit_cubic_normal(t: &[f64], x: &[[f64; 2]], des: &Design) -> Option<LsqFi
 }
 
 /// Squared residual of data point `it` for coefficients `c`.
-#[inline]
+#[inline(always)]
 fn residual2(c: &[Vec<f64>; 2], k: usize, des: &Design, x: &[[f64; 2]], it: usize) -> f64 {
     let l0 = des.interval[it] - k;
     let h = &des.basis[it];
