@@ -149,8 +149,9 @@ class GlobalMap:
         ``frame``. The map is exactly the one of calling ``merge`` for each item in order (items
         for the same instance apply in order); the merges of different instances run in parallel
         with the GIL released (the calling thread and a pool of its own; ``RAYON_NUM_THREADS``
-        sets the number of threads, 1 merges on the calling thread only). Returns per item None, or the exception ``merge`` would have
-        raised for it (KeyError for an unknown id, ValueError for bad geometry); a failed item
+        sets the number of threads, 1 merges on the calling thread only). Returns per item None,
+        or the exception ``merge`` would have raised for it (KeyError for an unknown id,
+        ValueError for bad geometry); a failed item
         changes nothing and does not affect the others. TypeError/ValueError are raised before
         any merge for malformed arguments (not a sequence, different lengths, wrong shapes)."""
 
