@@ -151,9 +151,9 @@ class GlobalMap:
         with the GIL released (the calling thread and a pool of its own; ``RAYON_NUM_THREADS``
         sets the number of threads, 1 merges on the calling thread only). Returns per item None,
         or the exception ``merge`` would have raised for it (KeyError for an unknown id,
-        ValueError for bad geometry); a failed item
-        changes nothing and does not affect the others. TypeError/ValueError are raised before
-        any merge for malformed arguments (not a sequence, different lengths, wrong shapes)."""
+        ValueError for bad geometry); a failed item changes nothing and does not affect the
+        others. TypeError/ValueError are raised before any merge for malformed arguments (not a
+        sequence, different lengths, wrong shapes)."""
 
     def replace(self, id: int, points: ArrayLike2, frame: int = 0) -> None:
         """Replaces the geometry of instance ``id`` with ``points`` (n, 2) world frame (resampled at
