@@ -2,20 +2,31 @@
 //! slots of the store.
 //!
 //! Design: the exact box of every slot is kept next to the tree (`boxes`), so the index can
-//! answer [`SpatialIndex::get`] and rebuild itself. Updates go through `Bvh::insert`, which sets
-//! the leaf box exactly and only *grows* ancestors; removals go through `Bvh::remove`, which leaves
-//! unreachable wide nodes behind until the next rebuild. Both are correct for queries (ancestors
-//! always enclose their leaves and leaves hold exact boxes) but degrade the tree over time, so the
-//! tree is rebuilt from `boxes` (binned SAH build) once the number of removals and shrinking
-//! updates since the last build exceeds half the live leaves (amortised O(log N) per operation).
-//! `Bvh::optimize_incremental` is deliberately not used (parry PR #409: it can act on orphaned
-//! nodes left by `remove`).
+//! answer [`SpatialIndex::get`], filter query hits exactly and rebuild itself. The tree holds
+//! *loose* boxes (`loose`: the exact box grown by [`LOOSE_MARGIN`] on every side, the "fat AABB" of
+//! dynamic trees): an update whose new exact box still fits in the slot's loose box leaves the
+//! tree alone (most merges move an instance by centimetres), and query hits are filtered by the
+//! exact boxes, so answers are exactly those of the exact boxes. Other updates go through
+//! `Bvh::insert`, which sets the leaf box and only *grows* ancestors; removals go through
+//! `Bvh::remove`, which leaves unreachable wide nodes behind until the next rebuild. Both are
+//! correct for queries (ancestors always enclose their leaves) but degrade the tree over time, so
+//! the tree is rebuilt from the loose boxes (binned SAH build) once the number of removals and
+//! shrinking updates since the last build exceeds half the live leaves (amortised O(log N) per
+//! operation). `Bvh::optimize_incremental` is deliberately not used (parry PR #409: it can act on
+//! orphaned nodes left by `remove`).
 
 use parry2d_f64::bounding_volume::{Aabb, BoundingVolume};
 use parry2d_f64::partitioning::{Bvh, BvhBuildStrategy};
 
 /// Rebuild when `stale > max(REBUILD_MIN, live / 2)`.
 const REBUILD_MIN: usize = 64;
+/// How far (metres) a slot's box in the tree reaches beyond its exact box on every side.
+const LOOSE_MARGIN: f64 = 1.0;
+
+/// `aabb` grown by [`LOOSE_MARGIN`] on every side.
+fn loosen(aabb: Aabb) -> Aabb {
+    aabb.loosened(LOOSE_MARGIN)
+}
 
 /// A dynamic bounding-box index: insert / update / remove a slot's box, query all slots whose box
 /// intersects a box in O(log N + k).
@@ -25,6 +36,9 @@ pub struct SpatialIndex {
     bvh: Bvh,
     /// Exact box of each slot (`None`: slot not in the index).
     boxes: Vec<Option<Aabb>>,
+    /// The slot's box in the tree: its exact box when last (re)inserted, loosened by
+    /// [`LOOSE_MARGIN`]; it contains the exact box at all times.
+    loose: Vec<Option<Aabb>>,
     /// Number of `Some` entries in `boxes`.
     live: usize,
     /// Removals and shrinking updates since the last (re)build.
@@ -49,6 +63,7 @@ impl SpatialIndex {
                 index.live += 1;
             }
         }
+        index.loose = index.boxes.iter().map(|b| b.map(loosen)).collect();
         index.rebuild();
         index
     }
@@ -73,18 +88,24 @@ impl SpatialIndex {
         let s = slot as usize;
         if s >= self.boxes.len() {
             self.boxes.resize(s + 1, None);
+            self.loose.resize(s + 1, None);
         }
-        match self.boxes[s].replace(aabb) {
-            None => self.live += 1,
-            Some(old) => {
-                if !aabb.contains(&old) {
-                    // The leaf shrank somewhere: ancestors stay loose until the next rebuild.
-                    self.stale += 1;
-                }
+        if self.boxes[s].replace(aabb).is_none() {
+            self.live += 1;
+        }
+        // Still inside the tree's loose box: the tree needs no change.
+        if self.loose[s].is_some_and(|l| l.contains(&aabb)) {
+            return;
+        }
+        let new = loosen(aabb);
+        if let Some(old) = self.loose[s].replace(new) {
+            if !new.contains(&old) {
+                // The leaf shrank somewhere: ancestors stay loose until the next rebuild.
+                self.stale += 1;
             }
         }
-        // Sets the leaf box exactly and grows the ancestors as needed (new leaf: SAH descent).
-        self.bvh.insert(aabb, slot);
+        // Sets the leaf box and grows the ancestors as needed (new leaf: SAH descent).
+        self.bvh.insert(new, slot);
         self.maybe_rebuild();
     }
 
@@ -93,11 +114,13 @@ impl SpatialIndex {
         let s = slot as usize;
         if let Some(entry) = self.boxes.get_mut(s) {
             if entry.take().is_some() {
+                self.loose[s] = None;
                 self.live -= 1;
                 self.stale += 1;
                 self.bvh.remove(slot);
                 while matches!(self.boxes.last(), Some(None)) {
                     self.boxes.pop();
+                    self.loose.pop();
                 }
                 self.maybe_rebuild();
             }
@@ -114,7 +137,16 @@ impl SpatialIndex {
         if self.live == 0 {
             return Vec::new();
         }
-        self.bvh.intersect_aabb(aabb).collect()
+        // The tree answers for the loose boxes; the exact boxes decide.
+        self.bvh
+            .intersect_aabb(aabb)
+            .filter(|&s| {
+                self.boxes
+                    .get(s as usize)
+                    .and_then(Option::as_ref)
+                    .is_some_and(|b| b.intersects(aabb))
+            })
+            .collect()
     }
 
     /// Rebuilds the tree from the stored boxes (compacts it and restores tight ancestors).
@@ -125,7 +157,7 @@ impl SpatialIndex {
             return;
         }
         let items = self
-            .boxes
+            .loose
             .iter()
             .enumerate()
             .filter_map(|(s, b)| b.map(|b| (s, b)));
@@ -188,6 +220,31 @@ mod tests {
         idx.remove(3);
         assert!(idx.is_empty());
         assert!(idx.query(&bx(0.5, 0.5, 0.1, 0.1)).is_empty());
+    }
+
+    /// Small updates stay inside the tree's loose box (no tree change), yet queries answer for
+    /// the exact boxes: a shrunk box is no longer hit where it left, a grown one is hit where it
+    /// went.
+    #[test]
+    fn small_updates_answer_exactly() {
+        let mut idx = SpatialIndex::new();
+        for s in 0..20 {
+            idx.upsert(s, bx(s as f64 * 10.0, 0.0, 4.0, 4.0));
+        }
+        idx.upsert(5, bx(50.5, 0.5, 3.0, 3.0)); // shrink by 0.5 m on every side
+        assert!(idx.query(&bx(50.0, 0.0, 0.2, 0.2)).is_empty());
+        assert_eq!(idx.query(&bx(51.0, 1.0, 0.2, 0.2)), vec![5]);
+        idx.upsert(6, bx(59.6, 0.0, 4.8, 4.0)); // grow by 0.4 m to both sides in x
+        assert_eq!(idx.query(&bx(59.5, 1.0, 0.2, 0.2)), vec![6]);
+        assert_eq!(idx.query(&bx(64.3, 1.0, 0.05, 0.05)), vec![6]);
+        assert_eq!(idx.get(5), Some(&bx(50.5, 0.5, 3.0, 3.0)));
+        for q in [
+            bx(49.0, -1.0, 2.0, 2.0),
+            bx(58.0, 0.0, 2.0, 5.0),
+            bx(0.0, 0.0, 300.0, 1.0),
+        ] {
+            assert_eq!(sorted(idx.query(&q)), idx.query_brute_force(&q));
+        }
     }
 
     #[test]
