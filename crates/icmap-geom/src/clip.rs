@@ -130,6 +130,15 @@ fn clip_polyline_by_segments(points: &[Point], patch: &Patch, reject: bool) -> V
     pieces
 }
 
+/// A ring without a repeated closing point.
+pub(crate) fn open_ring(ring: &[Point]) -> &[Point] {
+    if ring.len() >= 2 && ring[0] == ring[ring.len() - 1] {
+        &ring[..ring.len() - 1]
+    } else {
+        ring
+    }
+}
+
 /// Twice the signed area of a ring (positive when counter-clockwise).
 pub(crate) fn signed_area2(ring: &[Point]) -> f64 {
     let n = ring.len();
@@ -152,10 +161,7 @@ pub fn clip_polygon(ring: &[Point], patch: &Patch) -> Vec<Point> {
 /// [`clip_polygon`]; `shortcut`: skip the clip edges when every vertex is inside (they would keep
 /// the ring as it is).
 fn clip_polygon_impl(ring: &[Point], patch: &Patch, shortcut: bool) -> Vec<Point> {
-    let mut ring = ring;
-    if ring.len() >= 2 && ring[0] == ring[ring.len() - 1] {
-        ring = &ring[..ring.len() - 1];
-    }
+    let ring = open_ring(ring);
     if ring.len() < 3 || !ring.iter().all(finite) {
         return Vec::new();
     }

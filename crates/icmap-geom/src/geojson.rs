@@ -4,6 +4,7 @@
 //! viewing and exchange with GIS tools in a local projected frame. Polygons follow RFC 7946: the
 //! ring is closed (first point repeated at the end) and counter-clockwise.
 
+use crate::clip::signed_area2;
 use crate::error::Result;
 use crate::persist::write_atomic;
 use crate::store::{GlobalMap, Instance};
@@ -14,17 +15,6 @@ use std::path::Path;
 /// Appends `[x,y]` (shortest round-trip decimal form; stored points are always finite).
 fn push_point(out: &mut String, p: &Point) {
     let _ = write!(out, "[{:?},{:?}]", p.x, p.y);
-}
-
-/// Twice the signed area of a ring (positive: counter-clockwise).
-fn signed_area2(ring: &[Point]) -> f64 {
-    let n = ring.len();
-    (0..n)
-        .map(|i| {
-            let (a, b) = (ring[i], ring[(i + 1) % n]);
-            a.x * b.y - b.x * a.y
-        })
-        .sum()
 }
 
 fn push_feature(out: &mut String, inst: &Instance) {

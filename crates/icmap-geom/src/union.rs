@@ -3,7 +3,7 @@
 //! Input is validated first (finite coordinates, at least 3 points per ring) because the overlay
 //! engine must never see NaN. Self-intersecting rings are accepted: the overlay resolves them.
 
-use crate::clip::signed_area2;
+use crate::clip::{open_ring, signed_area2};
 use crate::error::Result;
 use crate::types::{validate_points, Point};
 use geo::{BooleanOps, Coord, LineString, MultiPolygon, Polygon};
@@ -28,15 +28,6 @@ fn balanced_union(mut parts: Vec<MultiPolygon<f64>>) -> MultiPolygon<f64> {
         parts = next;
     }
     parts.pop().unwrap_or_else(|| MultiPolygon(vec![]))
-}
-
-/// A ring without a repeated closing point.
-fn open_ring(ring: &[Point]) -> &[Point] {
-    if ring.len() >= 2 && ring[0] == ring[ring.len() - 1] {
-        &ring[..ring.len() - 1]
-    } else {
-        ring
-    }
 }
 
 /// The ring as a geo polygon, oriented counter-clockwise (by its signed area).
@@ -370,6 +361,22 @@ mod tests {
         );
     }
 
+    /// A C-shaped ring (open to the left) and a bar closing its mouth: their union is a square
+    /// ring around a hole.
+    fn c_and_bar() -> (Vec<Point>, Vec<Point>) {
+        let c = vec![
+            p(0.0, 0.0),
+            p(6.0, 0.0),
+            p(6.0, 6.0),
+            p(0.0, 6.0),
+            p(0.0, 4.0),
+            p(4.0, 4.0),
+            p(4.0, 2.0),
+            p(0.0, 2.0),
+        ];
+        (c, rect(-1.0, 1.0, 2.0, 5.0))
+    }
+
     fn rect(x0: f64, y0: f64, x1: f64, y1: f64) -> Vec<Point> {
         vec![p(x0, y0), p(x1, y0), p(x1, y1), p(x0, y1)]
     }
@@ -584,17 +591,7 @@ mod tests {
             &rect(1.0, 0.0, 2.0, 3.0)
         ));
         // A ring around a hole: an annulus-like union whose hole is dropped.
-        let c = vec![
-            p(0.0, 0.0),
-            p(6.0, 0.0),
-            p(6.0, 6.0),
-            p(0.0, 6.0),
-            p(0.0, 4.0),
-            p(4.0, 4.0),
-            p(4.0, 2.0),
-            p(0.0, 2.0),
-        ];
-        let bar = rect(-1.0, 1.0, 2.0, 5.0);
+        let (c, bar) = c_and_bar();
         assert!(check_fast_vs_overlay(&c, &bar));
         let u = polygon_union(&[c, bar]).unwrap();
         assert_eq!(u.len(), 1);
@@ -704,17 +701,7 @@ mod tests {
     /// in it, which the overlay keeps as a separate polygon), and with a single piece.
     #[test]
     fn second_try_declines_holes_and_single_pieces() {
-        let c = vec![
-            p(0.0, 0.0),
-            p(6.0, 0.0),
-            p(6.0, 6.0),
-            p(0.0, 6.0),
-            p(0.0, 4.0),
-            p(4.0, 4.0),
-            p(4.0, 2.0),
-            p(0.0, 2.0),
-        ];
-        let bar = rect(-1.0, 1.0, 2.0, 5.0);
+        let (c, bar) = c_and_bar();
         assert!(crate::union_fast::union_two_simple(&c, &bar).is_some());
         assert!(crate::union_fast::union_two_simple_solid(&c, &bar).is_none());
         // An island in that hole: two polygons from the overlay, never one ring.
