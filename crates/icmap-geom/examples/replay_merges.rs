@@ -8,6 +8,10 @@ use icmap_geom::merge::{merge_polygon, merge_polyline};
 use icmap_geom::types::Point;
 use std::time::Instant;
 
+/// The allocator of the Python extension (`icmap-py`), so that the replay measures what it runs.
+#[global_allocator]
+static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
+
 type Case = (i64, Vec<Point>, Vec<Point>);
 
 /// A little-endian reader over the recorded bytes.

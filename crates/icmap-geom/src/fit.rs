@@ -344,24 +344,54 @@ fn lsq_fit_cubic_normal(t: &[f64], x: &[[f64; 2]], des: &Design) -> Option<LsqFi
     // Band storage: a[i][j] = A(i, i + j).
     let mut a = vec![[0.0f64; 5]; nk1];
     let mut rhs = [vec![0.0f64; nk1], vec![0.0f64; nk1]];
-    for ((h, xy), &l) in des.basis.iter().zip(x).zip(&des.interval) {
-        let j0 = l - 3;
-        let v = [xy[0] - origin[0], xy[1] - origin[1]];
-        // The 10 products of the 4 x 4 block, unrolled (one bounds check per slice).
+    // The points come in knot-interval order: each interval's 4 x 4 block (10 distinct products)
+    // and right-hand sides are summed in registers and added to the band once per interval.
+    let mut flush = |j0: usize, blk: &[f64; 10], bx: &[f64; 4], by: &[f64; 4]| {
         let rows = &mut a[j0..j0 + K1];
-        for i in 0..K1 {
-            let hi = h[i];
-            let row = &mut rows[i];
-            for j in i..K1 {
-                row[j - i] += hi * h[j];
+        let mut q = 0;
+        for (i, row) in rows.iter_mut().enumerate() {
+            for cell in &mut row[..K1 - i] {
+                *cell += blk[q];
+                q += 1;
             }
         }
         let [rx, ry] = &mut rhs;
-        let (rx, ry) = (&mut rx[j0..j0 + K1], &mut ry[j0..j0 + K1]);
         for i in 0..K1 {
-            rx[i] += h[i] * v[0];
-            ry[i] += h[i] * v[1];
+            rx[j0 + i] += bx[i];
+            ry[j0 + i] += by[i];
         }
+    };
+    let mut cur = usize::MAX;
+    let (mut blk, mut bx, mut by) = ([0.0f64; 10], [0.0f64; 4], [0.0f64; 4]);
+    for ((h, xy), &l) in des.basis.iter().zip(x).zip(&des.interval) {
+        let j0 = l - 3;
+        if j0 != cur {
+            if cur != usize::MAX {
+                flush(cur, &blk, &bx, &by);
+            }
+            (blk, bx, by) = ([0.0; 10], [0.0; 4], [0.0; 4]);
+            cur = j0;
+        }
+        let v = [xy[0] - origin[0], xy[1] - origin[1]];
+        let [h0, h1, h2, h3] = [h[0], h[1], h[2], h[3]];
+        // Row-major upper triangle: (0,0..3), (1,1..3), (2,2..3), (3,3).
+        blk[0] += h0 * h0;
+        blk[1] += h0 * h1;
+        blk[2] += h0 * h2;
+        blk[3] += h0 * h3;
+        blk[4] += h1 * h1;
+        blk[5] += h1 * h2;
+        blk[6] += h1 * h3;
+        blk[7] += h2 * h2;
+        blk[8] += h2 * h3;
+        blk[9] += h3 * h3;
+        for i in 0..K1 {
+            bx[i] += h[i] * v[0];
+            by[i] += h[i] * v[1];
+        }
+    }
+    if cur != usize::MAX {
+        flush(cur, &blk, &bx, &by);
     }
     // Banded Cholesky A = R^T R; r[i][j] = R(i, i + j).
     let mut r = vec![[0.0f64; 5]; nk1];
@@ -881,7 +911,7 @@ const GL3_W_MID: f64 = 8.0 / 18.0;
 /// 3-node rule's error, a bound far above the 5-node rule's).
 const QUAD_TOL: f64 = 1e-5;
 /// Length of the arc-length table's pieces before any split, in spacings.
-const PIECE_SPACINGS: f64 = 4.0;
+const PIECE_SPACINGS: f64 = 8.0;
 /// Tolerance (relative to `spacing`) on the arc length of an inverted sample, far below the
 /// documented `1e-3 * spacing`.
 const INVERT_TOL: f64 = 1e-9;
