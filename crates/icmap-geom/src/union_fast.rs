@@ -11,7 +11,7 @@
 //!    topology that is decided here.
 //! 2. One pass over consecutive edges of each ring rejects spikes (a neighbour folding back),
 //!    then a bucketed sweep along the long axis of the joint bounding box (edges counting-sorted
-//!    by their smallest coordinate there, a branch-free box test collecting candidates) visits
+//!    by their smallest coordinate there, the most selective test, across the axis, first) visits
 //!    every other pair of edges whose bounding boxes (grown by `tol`) overlap:
 //!    - two edges of the same ring that are not neighbours must stay `tol` apart (the ring is
 //!      simple), two neighbours must not fold back onto each other (no spike);
@@ -100,6 +100,66 @@ fn extent_of<'a>(points: impl Iterator<Item = &'a V>) -> Option<(f64, bool)> {
     }
     let extent = (x1 - x0).max(y1 - y0);
     (extent.is_finite() && extent > 0.0).then_some((extent, x1 - x0 >= y1 - y0))
+}
+
+/// An axis-aligned bounding box.
+#[derive(Clone, Copy)]
+struct BBox {
+    x0: f64,
+    x1: f64,
+    y0: f64,
+    y1: f64,
+}
+
+impl BBox {
+    fn join(&self, o: &BBox) -> BBox {
+        BBox {
+            x0: self.x0.min(o.x0),
+            x1: self.x1.max(o.x1),
+            y0: self.y0.min(o.y0),
+            y1: self.y1.max(o.y1),
+        }
+    }
+
+    /// The larger side and whether it is the x side; `None` when it is not finite and positive.
+    fn extent(&self) -> Option<(f64, bool)> {
+        let (w, h) = (self.x1 - self.x0, self.y1 - self.y0);
+        let extent = w.max(h);
+        (extent.is_finite() && extent > 0.0).then_some((extent, w >= h))
+    }
+}
+
+/// Writes `ring` in the frame centred at `origin` into `out`; returns its bounding box there and
+/// twice its signed area (as [`area2`] computes it). Comparisons ignore NaN in the box; a NaN
+/// coordinate still makes the area NaN.
+fn load_ring(ring: &[Point], origin: Point, out: &mut Vec<V>) -> (BBox, f64) {
+    let to_local = |p: &Point| V {
+        x: p.x - origin.x,
+        y: p.y - origin.y,
+    };
+    out.clear();
+    let mut bb = BBox {
+        x0: f64::INFINITY,
+        x1: f64::NEG_INFINITY,
+        y0: f64::INFINITY,
+        y1: f64::NEG_INFINITY,
+    };
+    let Some(last) = ring.last() else {
+        return (bb, 0.0);
+    };
+    let mut prev = to_local(last);
+    let mut s = 0.0;
+    for p in ring {
+        let v = to_local(p);
+        s += prev.cross(v);
+        prev = v;
+        bb.x0 = if v.x < bb.x0 { v.x } else { bb.x0 };
+        bb.x1 = if v.x > bb.x1 { v.x } else { bb.x1 };
+        bb.y0 = if v.y < bb.y0 { v.y } else { bb.y0 };
+        bb.y1 = if v.y > bb.y1 { v.y } else { bb.y1 };
+        out.push(v);
+    }
+    (bb, s)
 }
 
 /// Twice the signed area of a ring.
@@ -219,7 +279,8 @@ struct Scratch {
     sorted: Vec<SweepBox>,
     start: Vec<u32>,
     fill: Vec<u32>,
-    cand: Vec<u32>,
+    /// Each box's bucket (in `boxes` order).
+    bucket_of: Vec<u32>,
     crosses: Vec<Cross>,
     /// Per ring: crossing ids in order along the ring, and each crossing's place in that order.
     order: [Vec<u32>; 2],
@@ -244,7 +305,7 @@ fn union_in(a: &[Point], b: &[Point], sc: &mut Scratch, holes_ok: bool) -> Optio
         sorted,
         start,
         fill,
-        cand,
+        bucket_of,
         crosses,
         order,
         rank,
@@ -256,23 +317,16 @@ fn union_in(a: &[Point], b: &[Point], sc: &mut Scratch, holes_ok: bool) -> Optio
     if n < 3 || m < 3 || n + m > MAX_VERTICES {
         return None;
     }
+    // Local frame, joint bounding box and signed areas, in one pass over each ring.
     let origin = a[0];
-    let to_local = |p: &Point| V {
-        x: p.x - origin.x,
-        y: p.y - origin.y,
-    };
-    ra.clear();
-    ra.extend(a.iter().map(to_local));
-    rb.clear();
-    rb.extend(b.iter().map(to_local));
-    let (extent, along_x) = extent_of(ra.iter().chain(rb.iter()))?;
+    let (box_a, mut area_a) = load_ring(a, origin, ra);
+    let (box_b, mut area_b) = load_ring(b, origin, rb);
+    let (extent, along_x) = box_a.join(&box_b).extent()?;
     let tol = REL_TOL * extent;
     let tol2 = tol * tol;
 
-    // Orientation (counter-clockwise) and non-degenerate area. The original vertex order is kept
-    // in `ia`/`ib` so that output vertices are the caller's exact coordinates.
-    let mut area_a = area2(ra);
-    let mut area_b = area2(rb);
+    // Orientation (counter-clockwise) and non-degenerate area. `orig` maps a vertex of the
+    // (possibly reversed) local ring back to the caller's exact coordinates.
     let min_area2 = tol * extent;
     if !(area_a.abs() > min_area2 && area_b.abs() > min_area2) {
         return None;
@@ -297,88 +351,86 @@ fn union_in(a: &[Point], b: &[Point], sc: &mut Scratch, holes_ok: bool) -> Optio
     };
     let rings: [&[V]; 2] = [ra, rb];
 
-    // Edges, no edge shorter than tol. The sweep runs along the longer side of the bounding box
-    // (a crossing is long and thin: across it, every edge would overlap every other one).
-    let sweep = |p: V| if along_x { p.x } else { p.y };
-    let across = |p: V| if along_x { p.y } else { p.x };
+    // Edges (no edge shorter than tol) and their boxes grown by tol, in one pass. The sweep runs
+    // along the longer side of the bounding box (a crossing is long and thin: across it, every
+    // edge would overlap every other one). Neighbours (consecutive edges p-v, v-q of one ring):
+    // the far ends must not come back near the other edge (spike); a triangle has every pair
+    // adjacent both ways, which this covers. `|c| / |pv|` is q's distance to the line through p
+    // and v, a lower bound of its distance to the segment (likewise p's to v-q): only a nearly
+    // collinear pair needs the exact test.
+    let spike = |e: &Edge, f: &Edge| {
+        let (p, v, q) = (e.p, e.q, f.q);
+        let c = v.sub(p).cross(q.sub(v)).abs();
+        c <= tol * e.len.max(f.len) * NEAR_MARGIN && (near(q, p, v, tol2) || near(p, v, q, tol2))
+    };
     edges.clear();
+    boxes.clear();
+    let mut lo = f64::INFINITY;
+    let mut hi = f64::NEG_INFINITY;
     for (ring, r) in rings.iter().enumerate() {
         let k = r.len();
+        let base = edges.len();
         for i in 0..k {
             let next = if i + 1 == k { 0 } else { i + 1 };
             let (p, q) = (r[i], r[next]);
             let d = q.sub(p);
-            if d.dot(d) < tol2 {
+            let len2 = d.dot(d);
+            if len2 < tol2 {
                 return None;
             }
-            edges.push(Edge {
+            let e = Edge {
                 ring: ring as u8,
                 i: i as u32,
                 p,
                 q,
-                len: d.dot(d).sqrt(),
-            });
-        }
-    }
-    // Neighbours (consecutive edges p-v, v-q of one ring): the far ends must not come back near
-    // the other edge (spike). A triangle has every pair adjacent both ways: this covers both.
-    // `|c| / |pv|` is q's distance to the line through p and v, a lower bound of its distance
-    // to the segment (likewise p's to v-q): only a nearly collinear pair needs the exact test.
-    for (ring, r) in rings.iter().enumerate() {
-        let base = if ring == 0 { 0 } else { n };
-        let k = r.len();
-        for i in 0..k {
-            let (e, f) = (
-                &edges[base + i],
-                &edges[base + if i + 1 == k { 0 } else { i + 1 }],
-            );
-            let (p, v, q) = (e.p, e.q, f.q);
-            let c = v.sub(p).cross(q.sub(v)).abs();
-            if c <= tol * e.len.max(f.len) * NEAR_MARGIN
-                && (near(q, p, v, tol2) || near(p, v, q, tol2))
-            {
+                len: len2.sqrt(),
+            };
+            if i > 0 && spike(&edges[base + i - 1], &e) {
                 return None;
             }
+            edges.push(e);
+            let (sp, sq, ap, aq) = if along_x {
+                (p.x, q.x, p.y, q.y)
+            } else {
+                (p.y, q.y, p.x, q.x)
+            };
+            let (x0, x1) = if sp < sq { (sp, sq) } else { (sq, sp) };
+            let (y0, y1) = if ap < aq { (ap, aq) } else { (aq, ap) };
+            let x0 = x0 - tol;
+            lo = if x0 < lo { x0 } else { lo };
+            hi = if x0 > hi { x0 } else { hi };
+            boxes.push(SweepBox {
+                x0,
+                x1: x1 + tol,
+                y0: y0 - tol,
+                y1: y1 + tol,
+                edge: (base + i) as u32,
+                next: (base + next) as u32,
+            });
+        }
+        if spike(&edges[base + k - 1], &edges[base]) {
+            return None;
         }
     }
     // Candidate pairs: edges whose bounding boxes (grown by tol) overlap. The boxes are bucketed
     // by their start along the sweep axis (a counting sort: `bucket` is monotone in x, so a box
     // overlapping box `e` starts in a bucket between `e`'s and that of `e`'s end). Every pair is
-    // met once, from the box that comes first in bucket order. The overlap test is branch-free:
-    // candidates are written to a buffer and kept by advancing its length.
+    // met once, from the box that comes first in bucket order.
     let ne = edges.len();
-    boxes.clear();
-    let mut lo = f64::INFINITY;
-    let mut hi = f64::NEG_INFINITY;
-    for (k, e) in edges.iter().enumerate() {
-        let next = if k + 1 == n {
-            0
-        } else if k + 1 == ne {
-            n
-        } else {
-            k + 1
-        };
-        let bx = SweepBox {
-            x0: sweep(e.p).min(sweep(e.q)) - tol,
-            x1: sweep(e.p).max(sweep(e.q)) + tol,
-            y0: across(e.p).min(across(e.q)) - tol,
-            y1: across(e.p).max(across(e.q)) + tol,
-            edge: k as u32,
-            next: next as u32,
-        };
-        lo = lo.min(bx.x0);
-        hi = hi.max(bx.x0);
-        boxes.push(bx);
-    }
     let nb = ne;
     let scale = nb as f64 / (hi - lo);
     let scale = if scale.is_finite() { scale } else { 0.0 };
-    let bucket = |x: f64| (((x - lo) * scale) as usize).min(nb - 1);
+    let last_bucket = (nb - 1) as u32;
+    // (`as u32` saturates; the argument is never negative: `x >= lo`.)
+    let bucket = |x: f64| (((x - lo) * scale) as u32).min(last_bucket) as usize;
     // `start[b]..start[b + 1]`: the boxes of bucket `b` in `sorted`.
     start.clear();
     start.resize(nb + 1, 0);
+    bucket_of.clear();
     for bx in boxes.iter() {
-        start[bucket(bx.x0) + 1] += 1;
+        let b = bucket(bx.x0);
+        bucket_of.push(b as u32);
+        start[b + 1] += 1;
     }
     for b in 0..nb {
         start[b + 1] += start[b];
@@ -387,31 +439,23 @@ fn union_in(a: &[Point], b: &[Point], sc: &mut Scratch, holes_ok: bool) -> Optio
     fill.extend_from_slice(&start[..nb]);
     sorted.clear();
     sorted.extend_from_slice(boxes);
-    for bx in boxes.iter() {
-        let b = bucket(bx.x0);
+    for (bx, &b) in boxes.iter().zip(bucket_of.iter()) {
+        let b = b as usize;
         sorted[fill[b] as usize] = *bx;
         fill[b] += 1;
     }
 
     crosses.clear();
-    cand.clear();
-    cand.resize(ne, 0);
     for (k, be) in sorted.iter().enumerate() {
         let end = start[bucket(be.x1) + 1] as usize;
-        let mut nc = 0usize;
         // `end > k`: a box's own bucket is at most its end's bucket.
-        for (bf, j) in sorted.get(k + 1..end).unwrap_or(&[]).iter().zip(k + 1..) {
-            let keep = (bf.x0 <= be.x1)
-                & (be.x0 <= bf.x1)
-                & (bf.y0 <= be.y1)
-                & (be.y0 <= bf.y1)
-                & (bf.edge != be.next)
-                & (be.edge != bf.next);
-            cand[nc] = j as u32;
-            nc += keep as usize;
-        }
-        for &j in &cand[..nc] {
-            let bf = &sorted[j as usize];
+        for bf in sorted.get(k + 1..end).unwrap_or(&[]) {
+            if !(bf.y0 <= be.y1 && be.y0 <= bf.y1 && bf.x0 <= be.x1 && be.x0 <= bf.x1)
+                || bf.edge == be.next
+                || be.edge == bf.next
+            {
+                continue;
+            }
             // Not neighbours (tested above).
             let (e, f) = (&edges[be.edge as usize], &edges[bf.edge as usize]);
             let (p1, p2, q1, q2) = (e.p, e.q, f.p, f.q);
