@@ -287,6 +287,9 @@ struct Scratch {
     rank: [Vec<u32>; 2],
     visited: Vec<bool>,
     ring_pts: Vec<Point>,
+    outer_pts: Vec<Point>,
+    /// The kept vertices in [`finish_ring`].
+    kept: Vec<Point>,
     keys: Vec<u128>,
 }
 
@@ -311,6 +314,8 @@ fn union_in(a: &[Point], b: &[Point], sc: &mut Scratch, holes_ok: bool) -> Optio
         rank,
         visited,
         ring_pts,
+        outer_pts,
+        kept,
         keys,
     } = sc;
     let (n, m) = (a.len(), b.len());
@@ -542,21 +547,23 @@ fn union_in(a: &[Point], b: &[Point], sc: &mut Scratch, holes_ok: bool) -> Optio
         }
     }
 
-    let out_ring = |ring: u8| -> Vec<Point> {
-        let len = rings[ring as usize].len();
-        (0..len).map(|i| orig(ring, i)).collect()
-    };
     if crosses.is_empty() {
-        let rings_out = if inside(ra[0], rb) {
-            vec![out_ring(1)]
+        let rings_out: &[u8] = if inside(ra[0], rb) {
+            &[1]
         } else if inside(rb[0], ra) {
-            vec![out_ring(0)]
+            &[0]
         } else if area_a >= area_b {
-            vec![out_ring(0), out_ring(1)]
+            &[0, 1]
         } else {
-            vec![out_ring(1), out_ring(0)]
+            &[1, 0]
         };
-        return rings_out.into_iter().map(finish_ring).collect();
+        let mut out = Vec::with_capacity(rings_out.len());
+        for &ring in rings_out {
+            ring_pts.clear();
+            ring_pts.extend((0..rings[ring as usize].len()).map(|i| orig(ring, i)));
+            out.push(finish_ring(ring_pts, kept)?);
+        }
+        return Some(out);
     }
     if crosses.len() % 2 != 0 {
         return None;
@@ -608,7 +615,8 @@ fn union_in(a: &[Point], b: &[Point], sc: &mut Scratch, holes_ok: bool) -> Optio
     // Trace the loops.
     visited.clear();
     visited.resize(nc, false);
-    let mut outer: Option<(f64, Vec<Point>)> = None;
+    // Twice the area of the outer loop, whose points are kept in `outer_pts`.
+    let mut outer: Option<f64> = None;
     let mut holes_area2 = 0.0;
     let max_steps = n + m + 2 * nc + 1;
     for first_c in 0..nc {
@@ -673,20 +681,21 @@ fn union_in(a: &[Point], b: &[Point], sc: &mut Scratch, holes_ok: bool) -> Optio
             if outer.is_some() {
                 return None;
             }
-            outer = Some((a2, ring_pts.clone()));
+            outer = Some(a2);
+            std::mem::swap(ring_pts, outer_pts);
         } else if holes_ok {
             holes_area2 += a2;
         } else {
             return None;
         }
     }
-    let (outer_area2, outer) = outer?;
+    let outer_area2 = outer?;
     let union2 = outer_area2 + holes_area2;
     let slack = 2.0 * tol * extent;
     if !(union2 >= area_a.max(area_b) - slack && union2 <= area_a + area_b + slack) {
         return None;
     }
-    Some(vec![finish_ring(outer)?])
+    Some(vec![finish_ring(outer_pts, ring_pts)?])
 }
 
 /// Drops the inner vertices of axis-parallel runs and rotates the ring to start where i_overlay
@@ -694,52 +703,66 @@ fn union_in(a: &[Point], b: &[Point], sc: &mut Scratch, holes_ok: bool) -> Optio
 /// not certain on i_overlay's grid: another vertex's x within a hair of the smallest x, or the
 /// start or lowest-left vertex within a hair of the line through its neighbours (i_overlay could
 /// drop it as collinear); also when fewer than 3 vertices remain.
-fn finish_ring(ring: Vec<Point>) -> Option<Vec<Point>> {
+///
+/// One pass writes the kept vertices to `kept` (a working buffer) and finds their bounding box,
+/// the lowest-left one and the smallest x above the smallest; the output (one allocation) is
+/// `kept` rotated to the start.
+fn finish_ring(ring: &[Point], kept: &mut Vec<Point>) -> Option<Vec<Point>> {
     let n = ring.len();
-    let mut kept: Vec<Point> = Vec::with_capacity(n);
-    for i in 0..n {
-        let p = if i == 0 { ring[n - 1] } else { ring[i - 1] };
-        let q = if i + 1 == n { ring[0] } else { ring[i + 1] };
-        let c = ring[i];
-        // Only axis-parallel runs are dropped: they stay collinear on i_overlay's grid. Other
-        // nearly collinear vertices may or may not be dropped there, which moves no boundary.
-        let on_x_line = p.x == c.x && c.x == q.x;
-        let on_y_line = p.y == c.y && c.y == q.y;
-        if !(on_x_line || on_y_line) {
-            kept.push(c);
-        }
-    }
-    if kept.len() < 3 {
+    if n < 3 {
         return None;
     }
+    kept.clear();
     let (mut x0, mut x1, mut y0, mut y1) = (
         f64::INFINITY,
         f64::NEG_INFINITY,
         f64::INFINITY,
         f64::NEG_INFINITY,
     );
-    for p in &kept {
-        x0 = x0.min(p.x);
-        x1 = x1.max(p.x);
-        y0 = y0.min(p.y);
-        y1 = y1.max(p.y);
+    // `best`: index in `kept` of the first vertex of smallest `(x, y)`, `b` that vertex;
+    // `x_above`: the smallest x above `b.x`.
+    let mut best = 0usize;
+    let mut b = Point::new(f64::INFINITY, f64::INFINITY);
+    let mut x_above = f64::INFINITY;
+    // `p`, `c`, `q`: consecutive vertices around the ring.
+    let mut p = ring[n - 1];
+    let mut c = ring[0];
+    for &q in ring[1..].iter().chain(std::iter::once(&ring[0])) {
+        // Only axis-parallel runs are dropped: they stay collinear on i_overlay's grid. Other
+        // nearly collinear vertices may or may not be dropped there, which moves no boundary.
+        let on_x_line = p.x == c.x && c.x == q.x;
+        let on_y_line = p.y == c.y && c.y == q.y;
+        if !(on_x_line || on_y_line) {
+            x0 = if c.x < x0 { c.x } else { x0 };
+            x1 = if c.x > x1 { c.x } else { x1 };
+            y0 = if c.y < y0 { c.y } else { y0 };
+            y1 = if c.y > y1 { c.y } else { y1 };
+            if c.x < b.x || (c.x == b.x && c.y < b.y) {
+                if c.x != b.x {
+                    // Every earlier vertex has x >= b.x.
+                    x_above = b.x;
+                }
+                best = kept.len();
+                b = c;
+            } else if c.x != b.x && c.x < x_above {
+                x_above = c.x;
+            }
+            kept.push(c);
+        }
+        p = c;
+        c = q;
+    }
+    let len = kept.len();
+    if len < 3 {
+        return None;
     }
     let hair = REL_TOL * (x1 - x0).max(y1 - y0);
-    let mut best = 0;
-    for (i, p) in kept.iter().enumerate() {
-        let b = kept[best];
-        if p.x < b.x || (p.x == b.x && p.y < b.y) {
-            best = i;
-        }
-    }
-    let bx = kept[best].x;
-    if kept.iter().any(|p| p.x != bx && p.x - bx < hair) {
+    if x_above - b.x < hair {
         return None;
     }
     // i_overlay starts a contour at the far end of the lowest-left vertex's upper link, which on
     // a counter-clockwise ring is that vertex's predecessor.
-    let len = kept.len();
-    let start = (best + len - 1) % len;
+    let start = if best == 0 { len - 1 } else { best - 1 };
     // A start or lowest-left vertex that is collinear with its neighbours up to a hair could be
     // dropped by i_overlay (collinear on its grid): the contour would start elsewhere.
     for i in [start, best] {
@@ -749,8 +772,10 @@ fn finish_ring(ring: Vec<Point>) -> Option<Vec<Point>> {
             return None;
         }
     }
-    kept.rotate_left(start);
-    Some(kept)
+    let mut out = Vec::with_capacity(len);
+    out.extend_from_slice(&kept[start..]);
+    out.extend_from_slice(&kept[..start]);
+    Some(out)
 }
 
 /// Whether a closed ring (no repeated closing point, finite) is clearly simple: at least 3
