@@ -52,21 +52,36 @@ fn to_polygon(ring: &[Point]) -> Polygon<f64> {
 /// rings up to floating-point rounding (i_overlay snaps to a grid of about `extent / 2^30`),
 /// including each ring's first vertex (its smallest `(x, y)`).
 pub fn polygon_union(rings: &[Vec<Point>]) -> Result<Vec<Vec<Point>>> {
-    for (i, ring) in rings.iter().enumerate() {
-        let r = open_ring(ring);
-        // The name is formatted only for an error (a merge is a few microseconds).
-        if r.len() < 3 || r.iter().any(|p| !(p.x.is_finite() && p.y.is_finite())) {
-            validate_points(r, 3, &format!("ring {i}"))?;
-        }
-    }
     if let [a, b] = rings {
-        let (a, b) = (open_ring(a), open_ring(b));
-        if let Some(out) = crate::union_fast::union_two_simple(a, b) {
-            return Ok(out);
-        }
-        return Ok(union_two_resolved(a, b));
+        return polygon_union_two(a, b);
+    }
+    for (i, ring) in rings.iter().enumerate() {
+        validate_ring(ring, i)?;
     }
     Ok(overlay_union(rings))
+}
+
+/// [`polygon_union`] of exactly two rings, taken by reference (no copies into a `Vec` of rings):
+/// the same result and the same errors as `polygon_union(&[a.to_vec(), b.to_vec()])`.
+pub fn polygon_union_two(a: &[Point], b: &[Point]) -> Result<Vec<Vec<Point>>> {
+    validate_ring(a, 0)?;
+    validate_ring(b, 1)?;
+    let (a, b) = (open_ring(a), open_ring(b));
+    if let Some(out) = crate::union_fast::union_two_simple(a, b) {
+        return Ok(out);
+    }
+    Ok(union_two_resolved(a, b))
+}
+
+/// Errors unless ring number `i` has at least 3 points (without a repeated closing point), all
+/// finite.
+fn validate_ring(ring: &[Point], i: usize) -> Result<()> {
+    let r = open_ring(ring);
+    // The name is formatted only for an error (a merge is a few microseconds).
+    if r.len() < 3 || r.iter().any(|p| !(p.x.is_finite() && p.y.is_finite())) {
+        validate_points(r, 3, &format!("ring {i}"))?;
+    }
+    Ok(())
 }
 
 /// The exterior of a polygon without its repeated closing point.
