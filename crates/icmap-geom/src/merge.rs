@@ -22,7 +22,7 @@ fn fit_or_polyline(points: &[Point], s: f64, spacing: f64) -> Result<Vec<Point>>
 }
 use crate::resample::{cumulative_lengths, dedup, polyline_length, resample_spacing};
 use crate::types::{validate_points, Point};
-use crate::union::polygon_union;
+use crate::union::polygon_union_two;
 use nalgebra::Vector2;
 
 /// Consecutive points closer than this (metres) are merged before merging.
@@ -365,7 +365,7 @@ pub fn merge_polygon(global: &[Point], detected: &[Point], spacing: f64) -> Resu
             reason: format!("must be finite and > 0, got {spacing}"),
         });
     }
-    let union = polygon_union(&[global.to_vec(), detected.to_vec()])?;
+    let union = polygon_union_two(global, detected)?;
     let ring = match union.len() {
         0 => {
             return Err(GeomError::Degenerate {
