@@ -137,7 +137,8 @@ class GlobalMap:
     def merge(self, id: int, points: ArrayLike2, frame: int = 0) -> None:
         """Merges a detection (n, 2) world frame into instance ``id`` by its class rule (curve fit
         for polylines, union for crossings). KeyError for an unknown id; on error the instance is
-        unchanged."""
+        unchanged. A small merge (stored plus detected points <= 512: microseconds of work) runs
+        with the GIL held when no other thread holds the map; other merges release the GIL."""
 
     def merge_many(
         self,

@@ -57,6 +57,10 @@ impl PyGlobalMap {
     }
 }
 
+/// Largest merge (stored plus detected points) that `merge` runs without releasing the GIL
+/// (about 10 microseconds of work; see `merge`).
+const GIL_HELD_MERGE_POINTS: usize = 512;
+
 #[pymethods]
 impl PyGlobalMap {
     /// An empty map; `smoothing` is the curve-fit `s` used on merge, `spacing` the stored point
@@ -151,6 +155,20 @@ impl PyGlobalMap {
     ) -> PyResult<()> {
         let id = id_arg(id)?;
         let pts = points_arg(points, "points")?;
+        // A merge of a detection into an instance of a few hundred points takes microseconds, of
+        // which releasing and re-taking the GIL would be a noticeable share: when the map's lock
+        // is free at once, such a merge runs with the GIL held. Larger merges, and any merge
+        // that would have to wait for another thread, release the GIL.
+        if pts.len() <= GIL_HELD_MERGE_POINTS {
+            if let Ok(mut map) = self.inner.try_write() {
+                let small = map
+                    .get(id)
+                    .is_none_or(|inst| inst.points.len() + pts.len() <= GIL_HELD_MERGE_POINTS);
+                if small {
+                    return map.merge(id, &pts, frame).py_err();
+                }
+            }
+        }
         py.detach(|| self.write()?.merge(id, &pts, frame).py_err())
     }
 
