@@ -404,9 +404,11 @@ def _time_reference(
     return total / len(poses) * 1e3, t_sample / len(poses) * 1e3, ids_per_frame
 
 
-def _bench_size(n: int, frames: int, ref_frames: int, seed: int, rounds: int = 3) -> SizeResult:
+def _bench_size(n: int, frames: int, ref_frames: int, seed: int, rounds: int = 5) -> SizeResult:
     """Best of ``rounds`` timed passes of each side (each on a fresh map, the same frames), as
-    ``timeit`` reports: the machine's hiccups only ever add time."""
+    ``timeit`` reports: the machine's hiccups only ever add time. The passes are interleaved
+    (engine, engine with ``merge_many``, reference; then again), so that a slow spell of a shared
+    machine falls on both sides rather than on whichever side happened to run then."""
     instances = city_instances(n, seed)
     poses = random_poses(instances, frames, seed + 1)
     rng = np.random.default_rng(seed + 2)
@@ -416,8 +418,13 @@ def _bench_size(n: int, frames: int, ref_frames: int, seed: int, rounds: int = 3
     start = {int(i): probe.get(int(i)) for i in probe.ids()}
     del probe
 
-    engine = [_time_engine(instances, poses, dets, batched=False) for _ in range(rounds)]
-    batched = [_time_engine(instances, poses, dets, batched=True) for _ in range(rounds)]
+    m = min(ref_frames, frames)
+    engine, batched, refs = [], [], []
+    for _ in range(rounds):
+        engine.append(_time_engine(instances, poses, dets, batched=False))
+        batched.append(_time_engine(instances, poses, dets, batched=True))
+        if m > 0:
+            refs.append(_time_reference(start, poses[:m], dets[:m]))
     seq_map, bat_map = engine[0][3], batched[0][3]
     for i in (int(j) for j in seq_map.ids()[:: max(1, len(seq_map) // 50)]):
         if seq_map.get(i)[1].tobytes() != bat_map.get(i)[1].tobytes():
@@ -426,9 +433,7 @@ def _bench_size(n: int, frames: int, ref_frames: int, seed: int, rounds: int = 3
     best = min(engine, key=lambda r: r[0])
 
     reference_ms, reference_sample_ms, agree = None, None, "-"
-    if ref_frames > 0:
-        m = min(ref_frames, frames)
-        refs = [_time_reference(start, poses[:m], dets[:m]) for _ in range(rounds)]
+    if refs:
         ref_best = min(refs, key=lambda r: r[0])
         reference_ms, reference_sample_ms = ref_best[0], ref_best[1]
         same = sum(a == b for a, b in zip(refs[0][2], engine_ids[:m], strict=True))
@@ -461,7 +466,10 @@ def add_geometry_arguments(parser: argparse.ArgumentParser) -> None:
         help="frames timed per size (shapely/scipy; the first ones of the engine's frames)",
     )
     parser.add_argument(
-        "--rounds", type=int, default=3, help="timed passes per side; the best one is reported"
+        "--rounds",
+        type=int,
+        default=5,
+        help="timed passes per side, interleaved between the sides; the best one is reported",
     )
     parser.add_argument("--seed", type=int, default=0)
 
@@ -491,7 +499,8 @@ def _run_geometry(args: argparse.Namespace) -> int:
         "times per frame; 'merge': one GlobalMap.merge call per detection (one thread); "
         "'merge_many': one call per frame, instances merged in parallel "
         f"({os.cpu_count()} CPUs); 'sample' = the query + clip + sample part alone; "
-        f"each side: best of {max(1, args.rounds)} passes on a fresh map; 'ids agree': frames "
+        f"each side: best of {max(1, args.rounds)} passes (interleaved) on a fresh map; "
+        "'ids agree': frames "
         "where both sampled the same instance ids (later frames can differ at the patch border: "
         "the two maps' merged geometry drifts apart by centimetres)"
     )
