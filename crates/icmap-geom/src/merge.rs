@@ -20,7 +20,7 @@ fn fit_or_polyline(points: &[Point], s: f64, spacing: f64) -> Result<Vec<Point>>
         other => other,
     }
 }
-use crate::resample::{cumulative_lengths, dedup, polyline_length, resample_spacing};
+use crate::resample::{cumulative_lengths, dedup, resample_spacing};
 use crate::types::{validate_points, Point};
 use crate::union::polygon_union_two;
 use nalgebra::Vector2;
@@ -272,7 +272,9 @@ pub fn merge_polyline(
     }
     let g = dedup(global, DEDUP_EPS, false);
     let mut d = dedup(detected, DEDUP_EPS, false);
-    if d.len() < 2 || polyline_length(&d, false) <= DEDUP_EPS {
+    // (After `dedup`, a polyline of 3 or more points is longer than the tolerance: its first two
+    // points are farther apart.)
+    if d.len() < 2 || (d.len() == 2 && (d[1] - d[0]).norm() <= DEDUP_EPS) {
         return Err(GeomError::Degenerate {
             what: "detected polyline".into(),
             reason: "all its points coincide (zero length)".into(),

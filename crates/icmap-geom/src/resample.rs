@@ -28,7 +28,12 @@ pub fn dedup(points: &[Point], eps: f64, closed: bool) -> Vec<Point> {
     if n <= 1 {
         return points.to_vec();
     }
-    let far = |a: &Point, b: &Point| (b - a).norm() > eps;
+    // (Squared distances: no square root per point.)
+    let eps2 = eps * eps;
+    let far = |a: &Point, b: &Point| {
+        let (dx, dy) = (b.x - a.x, b.y - a.y);
+        dx * dx + dy * dy > eps2
+    };
     let mut kept: Vec<Point> = Vec::with_capacity(n);
     kept.push(points[0]);
     let body_end = if closed { n } else { n - 1 };
@@ -55,12 +60,11 @@ pub fn dedup(points: &[Point], eps: f64, closed: bool) -> Vec<Point> {
 
 /// Cumulative arc length at every vertex of `pts` (first entry 0).
 pub(crate) fn cumulative_lengths(pts: &[Point]) -> Vec<f64> {
-    let mut cum = Vec::with_capacity(pts.len());
+    let mut cum = vec![0.0; pts.len().max(1)];
     let mut acc = 0.0;
-    cum.push(0.0);
-    for w in pts.windows(2) {
+    for (c, w) in cum[1..].iter_mut().zip(pts.windows(2)) {
         acc += (w[1] - w[0]).norm();
-        cum.push(acc);
+        *c = acc;
     }
     cum
 }
