@@ -1087,6 +1087,20 @@ impl SplineCurve {
         let k = self.degree;
         let t = &self.knots;
         let nk1 = t.len() - k - 1;
+        if k == 3 && nk1 == 4 && t[4] > t[3] {
+            // One cubic span (no interior knots): the coefficients are its Bernstein control
+            // points, and its derivative is 3 / w times the Bernstein quadratic of their
+            // differences, here in power form.
+            let (a, w) = (t[3], t[4] - t[3]);
+            let d = [0, 1].map(|i| {
+                let c = &self.coeffs[i];
+                let (d0, d1, d2) = (c[1] - c[0], c[2] - c[1], c[3] - c[2]);
+                let f = 3.0 / w;
+                [f * d0, f * 2.0 * (d1 - d0), f * (d0 - 2.0 * d1 + d2)]
+            });
+            let p0 = [self.coeffs[0][0], self.coeffs[1][0]];
+            return vec![Span { a, w, d, p0 }];
+        }
         (k..nk1)
             .filter(|&l| t[l + 1] > t[l])
             .map(|l| {
