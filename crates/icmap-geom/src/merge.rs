@@ -63,7 +63,7 @@ struct Projector<'a> {
     travel: f64,
     /// The previous query of [`Self::project_all`].
     last: Option<Point>,
-    /// `1 / len^2` per segment (the same value the exact test would compute).
+    /// `1 / len^2` per segment (long polylines only; short ones have it in `segs`).
     inv_len2: Vec<f64>,
 }
 
@@ -79,21 +79,18 @@ impl<'a> Projector<'a> {
             .map(|q| q.x.abs().max(q.y.abs()))
             .fold(cum[cum.len() - 1], f64::max);
         let nseg = g.len() - 1;
-        let inv_len2: Vec<f64> = cum
-            .windows(2)
-            .map(|w| {
-                let len = w[1] - w[0];
-                1.0 / (len * len)
-            })
-            .collect();
+        let inv = |w: &[f64]| {
+            let len = w[1] - w[0];
+            1.0 / (len * len)
+        };
         // The block test needs every segment to have a length (true after `dedup`).
         let short = nseg <= ALL_SEGMENTS_MAX && cum.windows(2).all(|w| w[1] > w[0]);
-        let (mut blocks, mut segs) = (Vec::new(), Vec::new());
+        let (mut blocks, mut segs, mut inv_len2) = (Vec::new(), Vec::new(), Vec::new());
         if short {
             segs.extend(
                 g.windows(2)
-                    .zip(&inv_len2)
-                    .map(|(w, &inv)| [w[0].x, w[0].y, w[1].x - w[0].x, w[1].y - w[0].y, inv]),
+                    .zip(cum.windows(2))
+                    .map(|(w, c)| [w[0].x, w[0].y, w[1].x - w[0].x, w[1].y - w[0].y, inv(c)]),
             );
             blocks.extend((0..nseg).step_by(BLOCK).map(|b0| {
                 let pts = &g[b0..=(b0 + BLOCK).min(nseg)];
@@ -105,6 +102,8 @@ impl<'a> Projector<'a> {
                 let half = (hi - lo) * 0.5;
                 [lo.x + half.x, lo.y + half.y, half.norm(), f64::NEG_INFINITY]
             }));
+        } else {
+            inv_len2.extend(cum.windows(2).map(inv));
         }
         Projector {
             g,
@@ -130,7 +129,12 @@ impl<'a> Projector<'a> {
         if len <= 0.0 {
             return None;
         }
-        let t_raw = (p - g[i]).dot(&d) * self.inv_len2[i];
+        let inv_len2 = if self.segs.is_empty() {
+            self.inv_len2[i]
+        } else {
+            self.segs[i][4]
+        };
+        let t_raw = (p - g[i]).dot(&d) * inv_len2;
         let t = t_raw.clamp(0.0, 1.0);
         let dist2 = (p - (g[i] + d * t)).norm_squared();
         let t_ext = if (i == 0 && t_raw < 0.0) || (i == nseg - 1 && t_raw > 1.0) {
