@@ -49,21 +49,10 @@ struct Projector<'a> {
     hint: usize,
     /// Absolute slack (metres) making the skip bound safe against rounding.
     slack: f64,
-    /// Per block of [`BLOCK`] consecutive segments (short polylines only, else empty): the centre
-    /// and the half diagonal of its vertices' bounding box (every point of the block lies that
-    /// near), and a lower bound of the distance from the query point to the block plus the
-    /// `travel` at which it was computed (`-inf` before any). A query point lies at most the
-    /// distance it moved from the previous one, so `bound - travel` stays a lower bound for
-    /// later queries, and most blocks are skipped by one comparison.
-    blocks: Vec<[f64; 4]>,
-    /// Per segment (short polylines only): start x, y, direction x, y and `1 / len^2`, the
-    /// operands of [`Self::seg_dist2`] in one place (the block test's inner loop).
-    segs: Vec<[f64; 5]>,
-    /// Sum of the distances between consecutive queries of [`Self::project_all`].
-    travel: f64,
-    /// The previous query of [`Self::project_all`].
-    last: Option<Point>,
-    /// `1 / len^2` per segment (long polylines only; short ones have it in `segs`).
+    /// Per block of [`BLOCK`] consecutive segments (short polylines only): the centre and the
+    /// half diagonal of its vertices' bounding box (every point of the block lies that near).
+    blocks: Option<Vec<[f64; 3]>>,
+    /// `1 / len^2` per segment (the same value the exact test would compute).
     inv_len2: Vec<f64>,
 }
 
@@ -79,42 +68,34 @@ impl<'a> Projector<'a> {
             .map(|q| q.x.abs().max(q.y.abs()))
             .fold(cum[cum.len() - 1], f64::max);
         let nseg = g.len() - 1;
-        let inv = |w: &[f64]| {
-            let len = w[1] - w[0];
-            1.0 / (len * len)
-        };
-        // The block test needs every segment to have a length (true after `dedup`).
-        let short = nseg <= ALL_SEGMENTS_MAX && cum.windows(2).all(|w| w[1] > w[0]);
-        let (mut blocks, mut segs, mut inv_len2) = (Vec::new(), Vec::new(), Vec::new());
-        if short {
-            segs.extend(
-                g.windows(2)
-                    .zip(cum.windows(2))
-                    .map(|(w, c)| [w[0].x, w[0].y, w[1].x - w[0].x, w[1].y - w[0].y, inv(c)]),
-            );
-            blocks.extend((0..nseg).step_by(BLOCK).map(|b0| {
-                let pts = &g[b0..=(b0 + BLOCK).min(nseg)];
-                let (mut lo, mut hi) = (pts[0], pts[0]);
-                for q in pts {
-                    lo = Point::new(lo.x.min(q.x), lo.y.min(q.y));
-                    hi = Point::new(hi.x.max(q.x), hi.y.max(q.y));
-                }
-                let half = (hi - lo) * 0.5;
-                [lo.x + half.x, lo.y + half.y, half.norm(), f64::NEG_INFINITY]
-            }));
-        } else {
-            inv_len2.extend(cum.windows(2).map(inv));
-        }
+        let blocks = (nseg <= ALL_SEGMENTS_MAX).then(|| {
+            (0..nseg)
+                .step_by(BLOCK)
+                .map(|b0| {
+                    let pts = &g[b0..=(b0 + BLOCK).min(nseg)];
+                    let (mut lo, mut hi) = (pts[0], pts[0]);
+                    for q in pts {
+                        lo = Point::new(lo.x.min(q.x), lo.y.min(q.y));
+                        hi = Point::new(hi.x.max(q.x), hi.y.max(q.y));
+                    }
+                    let half = (hi - lo) * 0.5;
+                    [lo.x + half.x, lo.y + half.y, half.norm()]
+                })
+                .collect()
+        });
         Projector {
             g,
             cum,
             hint: 0,
             slack: 1e-9 * (1.0 + scale),
             blocks,
-            segs,
-            travel: 0.0,
-            last: None,
-            inv_len2,
+            inv_len2: cum
+                .windows(2)
+                .map(|w| {
+                    let len = w[1] - w[0];
+                    1.0 / (len * len)
+                })
+                .collect(),
         }
     }
 
@@ -129,12 +110,7 @@ impl<'a> Projector<'a> {
         if len <= 0.0 {
             return None;
         }
-        let inv_len2 = if self.segs.is_empty() {
-            self.inv_len2[i]
-        } else {
-            self.segs[i][4]
-        };
-        let t_raw = (p - g[i]).dot(&d) * inv_len2;
+        let t_raw = (p - g[i]).dot(&d) * self.inv_len2[i];
         let t = t_raw.clamp(0.0, 1.0);
         let dist2 = (p - (g[i] + d * t)).norm_squared();
         let t_ext = if (i == 0 && t_raw < 0.0) || (i == nseg - 1 && t_raw > 1.0) {
@@ -145,69 +121,64 @@ impl<'a> Projector<'a> {
         Some((dist2, cum[i] + t_ext * len, d / len))
     }
 
-    /// The squared distance of [`Self::segment`] alone for a segment of `segs` (every segment
-    /// has a length there): the same arithmetic, bit for bit.
-    #[inline(always)]
-    fn seg_dist2(seg: &[f64; 5], p: &Point) -> f64 {
-        let [ax, ay, dx, dy, inv] = *seg;
-        let t = (((p.x - ax) * dx + (p.y - ay) * dy) * inv).clamp(0.0, 1.0);
-        let (ex, ey) = (p.x - (ax + dx * t), p.y - (ay + dy * t));
-        ex * ex + ey * ey
+    /// The squared distance of [`Self::segment`] alone (the same arithmetic).
+    #[inline]
+    fn dist2(&self, i: usize, p: &Point) -> Option<f64> {
+        let g = self.g;
+        let d = g[i + 1] - g[i];
+        let len = self.cum[i + 1] - self.cum[i];
+        if len <= 0.0 {
+            return None;
+        }
+        let t_raw = (p - g[i]).dot(&d) * self.inv_len2[i];
+        let t = t_raw.clamp(0.0, 1.0);
+        Some((p - (g[i] + d * t)).norm_squared())
     }
 
     fn project(&mut self, p: &Point) -> (f64, Vector2<f64>) {
-        if self.blocks.is_empty() {
-            self.project_scan(p)
-        } else {
+        if self.blocks.is_some() {
             self.project_all(p)
+        } else {
+            self.project_scan(p)
         }
     }
 
     /// Every segment considered: blocks of segments that cannot hold a nearer point skipped, the
     /// exact test on the segments of the others.
     fn project_all(&mut self, p: &Point) -> (f64, Vector2<f64>) {
-        if self.blocks.is_empty() {
+        let Some(blocks) = &self.blocks else {
             return self.project_scan_from(p, 0).0;
-        }
+        };
         let nseg = self.g.len() - 1;
         // The previous query's segment gives a first bound; a block whose bounding circle lies
         // farther than the best distance so far (plus a rounding slack) cannot hold a nearer point.
-        if let Some(q) = self.last {
-            self.travel += (p - q).norm();
-        }
-        self.last = Some(*p);
-        let travel = self.travel;
         let hint = self.hint.min(nseg - 1);
-        let segs = &self.segs;
         // best: (squared distance, segment); reach: its distance plus the slack (no segment
         // beyond reach + a block's radius from the block's centre can be nearer).
-        let (mut best_d, mut best_i) = (Self::seg_dist2(&segs[hint], p), hint);
-        let mut reach = best_d.sqrt() + self.slack;
-        for (b, block) in self.blocks.iter_mut().enumerate() {
-            // A lower bound from an earlier query, less the distance moved since.
-            if block[3] - travel > reach {
+        let mut best = self.dist2(hint, p).map(|d2| (d2, hint));
+        let mut reach = best.map_or(f64::INFINITY, |(d2, _)| d2.sqrt() + self.slack);
+        for (b, &[cx, cy, radius]) in blocks.iter().enumerate() {
+            let bound = reach + radius;
+            let (ex, ey) = (p.x - cx, p.y - cy);
+            if ex * ex + ey * ey > bound * bound {
                 continue;
             }
-            let (ex, ey) = (p.x - block[0], p.y - block[1]);
-            let gap = (ex * ex + ey * ey).sqrt() - block[2];
-            block[3] = gap + travel;
-            if gap > reach {
-                continue;
-            }
-            let i0 = b * BLOCK;
-            for (l, seg) in segs[i0..(i0 + BLOCK).min(nseg)].iter().enumerate() {
-                let i = i0 + l;
+            for i in b * BLOCK..((b + 1) * BLOCK).min(nseg) {
                 if i == hint {
                     continue;
                 }
-                let d2 = Self::seg_dist2(seg, p);
-                if d2 < best_d || (d2 == best_d && i < best_i) {
-                    (best_d, best_i) = (d2, i);
+                let Some(d2) = self.dist2(i, p) else { continue };
+                let better = match best {
+                    None => true,
+                    Some((bd, bi)) => d2 < bd || (d2 == bd && i < bi),
+                };
+                if better {
+                    best = Some((d2, i));
                     reach = d2.sqrt() + self.slack;
                 }
             }
         }
-        match self.segment(best_i, p).map(|c| (c, best_i)) {
+        match best.and_then(|(_, i)| self.segment(i, p).map(|c| (c, i))) {
             Some(((_, s, tangent), i)) => {
                 self.hint = i;
                 (s, tangent)
