@@ -281,6 +281,8 @@ struct Scratch {
     fill: Vec<u32>,
     /// Each box's bucket (in `boxes` order).
     bucket_of: Vec<u32>,
+    /// Candidate partners of one box (indices into `sorted`).
+    cand: Vec<u32>,
     crosses: Vec<Cross>,
     /// Per ring: crossing ids in order along the ring, and each crossing's place in that order.
     order: [Vec<u32>; 2],
@@ -309,6 +311,7 @@ fn union_in(a: &[Point], b: &[Point], sc: &mut Scratch, holes_ok: bool) -> Optio
         start,
         fill,
         bucket_of,
+        cand,
         crosses,
         order,
         rank,
@@ -450,17 +453,28 @@ fn union_in(a: &[Point], b: &[Point], sc: &mut Scratch, holes_ok: bool) -> Optio
         fill[b] += 1;
     }
 
+    // The overlap test is branch-free (whether two boxes overlap is data-dependent, and a
+    // mispredicted branch per pair costs more than the test): candidates are written to a buffer
+    // and kept by advancing its length.
     crosses.clear();
+    cand.clear();
+    cand.resize(ne, 0);
     for (k, be) in sorted.iter().enumerate() {
         let end = start[bucket(be.x1) + 1] as usize;
+        let mut nc = 0usize;
         // `end > k`: a box's own bucket is at most its end's bucket.
-        for bf in sorted.get(k + 1..end).unwrap_or(&[]) {
-            if !(bf.y0 <= be.y1 && be.y0 <= bf.y1 && bf.x0 <= be.x1 && be.x0 <= bf.x1)
-                || bf.edge == be.next
-                || be.edge == bf.next
-            {
-                continue;
-            }
+        for (bf, j) in sorted.get(k + 1..end).unwrap_or(&[]).iter().zip(k + 1..) {
+            let keep = (bf.y0 <= be.y1)
+                & (be.y0 <= bf.y1)
+                & (bf.x0 <= be.x1)
+                & (be.x0 <= bf.x1)
+                & (bf.edge != be.next)
+                & (be.edge != bf.next);
+            cand[nc] = j as u32;
+            nc += usize::from(keep);
+        }
+        for &j in &cand[..nc] {
+            let bf = &sorted[j as usize];
             // Not neighbours (tested above).
             let (e, f) = (&edges[be.edge as usize], &edges[bf.edge as usize]);
             let (p1, p2, q1, q2) = (e.p, e.q, f.p, f.q);
