@@ -1010,7 +1010,7 @@ const QUAD_TOL: f64 = 1e-5;
 const PIECE_SPACINGS: f64 = 8.0;
 /// Tolerance (relative to `spacing`) on the arc length of an inverted sample, far below the
 /// documented `1e-3 * spacing`.
-const INVERT_TOL: f64 = 1e-9;
+const INVERT_TOL: f64 = 1e-7;
 /// Maximal bisection depth of a piece.
 const QUAD_MAX_DEPTH: u32 = 12;
 
