@@ -158,8 +158,14 @@ fn rotate(cos: f64, sin: f64, a: &mut f64, b: &mut f64) {
 
 /// Back substitution for the banded upper-triangular `r` (`r[i][j]` = R(i, i + j), bandwidth `bw`).
 fn back_substitute(r: &[[f64; 5]], z: &[f64], bw: usize) -> Vec<f64> {
+    let mut c = vec![0.0; z.len()];
+    back_substitute_into(r, z, bw, &mut c);
+    c
+}
+
+/// [`back_substitute`] into `c` (`z.len()` long).
+fn back_substitute_into(r: &[[f64; 5]], z: &[f64], bw: usize, c: &mut [f64]) {
     let n = z.len();
-    let mut c = vec![0.0; n];
     for i in (0..n).rev() {
         let mut acc = z[i];
         for l in 1..bw.min(n - i) {
@@ -167,7 +173,6 @@ fn back_substitute(r: &[[f64; 5]], z: &[f64], bw: usize) -> Vec<f64> {
         }
         c[i] = acc / r[i][0];
     }
-    c
 }
 
 /// Least-squares fit with fixed knots: the triangularised system and the fit.
@@ -898,7 +903,9 @@ fn smooth_on_knots(
     let diag: f64 = fit.r.iter().map(|r| r[0]).sum();
     let mut p = nk1 as f64 / diag;
     let (mut ich1, mut ich3) = (false, false);
-    let mut best = (fit.c.clone(), fit.fp);
+    // The latest iteration's coefficients and fp (each iteration's replace the previous ones).
+    let mut coef = fit.c.clone();
+    let mut fp_best = fit.fp;
     // Work copies of the triangularised system, reset from `fit` on every iteration.
     let mut g = fit.r.clone();
     let mut c = fit.z.clone();
@@ -933,12 +940,10 @@ fn smooth_on_knots(
                 h[i2] = 0.0;
             }
         }
-        let coef = [
-            back_substitute(&g, &c[0], k2),
-            back_substitute(&g, &c[1], k2),
-        ];
+        back_substitute_into(&g, &c[0], k2, &mut coef[0]);
+        back_substitute_into(&g, &c[1], k2, &mut coef[1]);
         let fp: f64 = (0..m).map(|it| residual2(&coef, k, des, x, it)).sum();
-        best = (coef, fp);
+        fp_best = fp;
         let fpms = fp - s;
         if fpms.abs() < acc || iter == MAXIT {
             break;
@@ -979,7 +984,7 @@ fn smooth_on_knots(
         }
         p = rational_step(&mut p1, &mut f1, p2, f2, &mut p3, &mut f3);
     }
-    make_curve(t, best.0, k, u, best.1)
+    make_curve(t, coef, k, u, fp_best)
 }
 
 /// Gauss-Legendre nodes on `[0, 1]` (5 points) and their weights (summing to 1).
