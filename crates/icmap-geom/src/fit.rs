@@ -15,7 +15,7 @@
 //! The fitted curve is then evaluated about `spacing` apart by arc length.
 
 use crate::error::{GeomError, Result};
-use crate::resample::{cumulative_lengths, dedup, MAX_RESAMPLE_POINTS};
+use crate::resample::{cumulative_lengths, dedup_cow, MAX_RESAMPLE_POINTS};
 use crate::types::{validate_points, Point};
 
 /// FITPACK's relative tolerance on `fp = s` (parcur's `tol`).
@@ -678,7 +678,7 @@ pub fn fit_spline(points: &[Point], s: f64) -> Result<SplineCurve> {
             reason: format!("must be finite and >= 0, got {s}"),
         });
     }
-    let pts = dedup(points, DEDUP_EPS, false);
+    let pts = dedup_cow(points, DEDUP_EPS, false);
     // (The last cumulative length is the polyline's length: the same sums in the same order.)
     let cum = cumulative_lengths(&pts);
     let total = cum[cum.len() - 1];

@@ -20,7 +20,7 @@ fn fit_or_polyline(points: &[Point], s: f64, spacing: f64) -> Result<Vec<Point>>
         other => other,
     }
 }
-use crate::resample::{cumulative_lengths, dedup, resample_spacing};
+use crate::resample::{cumulative_lengths, dedup_cow, resample_spacing};
 use crate::types::{validate_points, Point};
 use crate::union::polygon_union_two;
 use nalgebra::Vector2;
@@ -270,8 +270,8 @@ pub fn merge_polyline(
             reason: format!("must be finite and > 0, got {spacing}"),
         });
     }
-    let g = dedup(global, DEDUP_EPS, false);
-    let mut d = dedup(detected, DEDUP_EPS, false);
+    let g = dedup_cow(global, DEDUP_EPS, false);
+    let mut d = dedup_cow(detected, DEDUP_EPS, false).into_owned();
     // (After `dedup`, a polyline of 3 or more points is longer than the tolerance: its first two
     // points are farther apart.)
     if d.len() < 2 || (d.len() == 2 && (d[1] - d[0]).norm() <= DEDUP_EPS) {
@@ -385,6 +385,7 @@ pub fn merge_polygon(global: &[Point], detected: &[Point], spacing: f64) -> Resu
 mod tests {
     use super::*;
     use crate::clip::signed_area2;
+    use crate::resample::dedup;
     use proptest::prelude::*;
 
     fn p(x: f64, y: f64) -> Point {

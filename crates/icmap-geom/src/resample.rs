@@ -58,6 +58,26 @@ pub fn dedup(points: &[Point], eps: f64, closed: bool) -> Vec<Point> {
     kept
 }
 
+/// [`dedup`] without a copy when nothing would be removed (the common case: geometry the map
+/// produced itself): the input borrowed if every consecutive pair (and, closed, the last and
+/// the first point) lies farther apart than `eps`, else [`dedup`]'s result.
+pub(crate) fn dedup_cow(points: &[Point], eps: f64, closed: bool) -> std::borrow::Cow<'_, [Point]> {
+    let eps2 = eps * eps;
+    let far = |a: &Point, b: &Point| {
+        let (dx, dy) = (b.x - a.x, b.y - a.y);
+        dx * dx + dy * dy > eps2
+    };
+    let n = points.len();
+    let clean = n <= 1
+        || (points.windows(2).all(|w| far(&w[0], &w[1]))
+            && !(closed && !far(&points[n - 1], &points[0])));
+    if clean {
+        std::borrow::Cow::Borrowed(points)
+    } else {
+        std::borrow::Cow::Owned(dedup(points, eps, closed))
+    }
+}
+
 /// Cumulative arc length at every vertex of `pts` (first entry 0).
 pub(crate) fn cumulative_lengths(pts: &[Point]) -> Vec<f64> {
     let mut cum = vec![0.0; pts.len().max(1)];
