@@ -70,7 +70,7 @@ pub(crate) fn dedup_cow(points: &[Point], eps: f64, closed: bool) -> std::borrow
     let n = points.len();
     let clean = n <= 1
         || (points.windows(2).all(|w| far(&w[0], &w[1]))
-            && !(closed && !far(&points[n - 1], &points[0])));
+            && (!closed || far(&points[n - 1], &points[0])));
     if clean {
         std::borrow::Cow::Borrowed(points)
     } else {
