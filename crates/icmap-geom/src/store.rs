@@ -8,7 +8,7 @@ use crate::clip::{clip_polygon, clip_polyline, sample_pieces};
 use crate::error::{GeomError, Result};
 use crate::index::SpatialIndex;
 use crate::merge::{merge_polygon, merge_polyline};
-use crate::resample::{dedup, resample_spacing};
+use crate::resample::{dedup_cow, resample_spacing};
 use crate::types::{validate_points, MapClass, Patch, Point};
 use parry2d_f64::bounding_volume::Aabb;
 use std::collections::HashMap;
@@ -57,7 +57,7 @@ fn merge_rule(
     let merged = if closed {
         let what = "detected crossing ring";
         validate_points(points, 2, what)?;
-        let ring = dedup(points, DEDUP_EPS, true);
+        let ring = dedup_cow(points, DEDUP_EPS, true);
         validate_points(&ring, 3, what)?;
         merge_polygon(current, &ring, config.spacing)?
     } else {
@@ -311,7 +311,7 @@ impl GlobalMap {
         let what = if closed { "crossing ring" } else { "polyline" };
         validate_points(points, 2, what)?;
         if closed {
-            let ring = dedup(points, DEDUP_EPS, true);
+            let ring = dedup_cow(points, DEDUP_EPS, true);
             validate_points(&ring, 3, what)?;
             resample_spacing(&ring, self.config.spacing, true)
         } else {
