@@ -746,7 +746,7 @@ fn fit_on_interpolation_knots(u: &[f64], x: &[[f64; 2]], k: usize, s: f64) -> Sp
     if fit0.fp - s <= 0.0 {
         return make_curve(t0, fit0.c, k, u, fit0.fp);
     }
-    smooth_on_knots(t, &des, &fit, u, x, k, s, fit0.fp, fpms)
+    smooth_on_knots(t, &fit, u, k, s, fit0.fp, fpms)
 }
 
 fn make_curve(t: Vec<f64>, c: [Vec<f64>; 2], k: usize, u: &[f64], fp: f64) -> SplineCurve {
@@ -782,7 +782,7 @@ fn fit_parametric(u: &[f64], x: &[[f64; 2]], k: usize, s: f64) -> SplineCurve {
     let mut fp0 = 0.0;
     let mut nplus = 0usize;
     let mut interpolating = false;
-    let (t, des, fit, fpms) = loop {
+    let (t, fit, fpms) = loop {
         let t = full_knots(&interior, k);
         let n = t.len();
         let first = n == nmin;
@@ -822,12 +822,12 @@ fn fit_parametric(u: &[f64], x: &[[f64; 2]], k: usize, s: f64) -> SplineCurve {
             // Accepted least-squares fit: within tolerance, the polynomial already smooth enough,
             // or the interpolating spline (n = nmax).
             if fpms < 0.0 && !first && fpms.abs() >= acc {
-                break (t, des, fit, fpms);
+                break (t, fit, fpms);
             }
             return make_curve(t, fit.c, k, u, fp);
         }
         if fpms < 0.0 {
-            break (t, des, fit, fpms);
+            break (t, fit, fpms);
         }
         // Number of knots to add.
         if first {
@@ -873,25 +873,21 @@ fn fit_parametric(u: &[f64], x: &[[f64; 2]], k: usize, s: f64) -> SplineCurve {
         }
     };
 
-    smooth_on_knots(t, &des, &fit, u, x, k, s, fp0, fpms)
+    smooth_on_knots(t, &fit, u, k, s, fp0, fpms)
 }
 
 /// FITPACK `fppara` part 2: with the knots `t` fixed (least-squares fit `fit` with `fp - s =
 /// fpms < 0`; `fp0` the least-squares polynomial's `fp`), the smoothing weight `p` with
 /// `fp(p) = s`.
-#[allow(clippy::too_many_arguments)]
 fn smooth_on_knots(
     t: Vec<f64>,
-    des: &Design,
     fit: &LsqFit,
     u: &[f64],
-    x: &[[f64; 2]],
     k: usize,
     s: f64,
     fp0: f64,
     fpms: f64,
 ) -> SplineCurve {
-    let m = u.len();
     let (k1, k2) = (k + 1, k + 2);
     let nmin = 2 * k1;
     let acc = TOL * s;
@@ -942,7 +938,18 @@ fn smooth_on_knots(
         }
         back_substitute_into(&g, &c[0], k2, &mut coef[0]);
         back_substitute_into(&g, &c[1], k2, &mut coef[1]);
-        let fp: f64 = (0..m).map(|it| residual2(&coef, k, des, x, it)).sum();
+        // fp = |B c - x|^2 = |R c - z|^2 + fp of the least-squares fit (B = Q R, z = Q^T x): a
+        // sum over the coefficients instead of over the data points.
+        let bw = k1.min(nk1);
+        let mut fp = fit.fp;
+        for (cd, zd) in coef.iter().zip(&fit.z) {
+            for (j, row) in fit.r.iter().enumerate() {
+                let w = bw.min(nk1 - j);
+                let rc: f64 = (0..w).map(|l| row[l] * cd[j + l]).sum();
+                let e = rc - zd[j];
+                fp += e * e;
+            }
+        }
         fp_best = fp;
         let fpms = fp - s;
         if fpms.abs() < acc || iter == MAXIT {
