@@ -80,11 +80,12 @@ pub(crate) fn dedup_cow(points: &[Point], eps: f64, closed: bool) -> std::borrow
 
 /// Cumulative arc length at every vertex of `pts` (first entry 0).
 pub(crate) fn cumulative_lengths(pts: &[Point]) -> Vec<f64> {
-    let mut cum = vec![0.0; pts.len().max(1)];
+    let mut cum = Vec::with_capacity(pts.len());
     let mut acc = 0.0;
-    for (c, w) in cum[1..].iter_mut().zip(pts.windows(2)) {
+    cum.push(0.0);
+    for w in pts.windows(2) {
         acc += (w[1] - w[0]).norm();
-        *c = acc;
+        cum.push(acc);
     }
     cum
 }
