@@ -390,3 +390,18 @@ def test_replace_keeps_bookkeeping_and_errors_leave_instance_unchanged() -> None
     with pytest.raises(KeyError):
         m.replace(999, np.array([[0.0, 0.0], [1.0, 1.0]]))
     assert m.info(i)["last_frame"] == 5 and np.array_equal(m.get(i)[1], pts)
+
+
+@pytest.mark.parametrize("length", [40.0, 700.0])
+def test_merge_same_result_with_gil_held_or_released(length: float) -> None:
+    """A merge of at most 512 points in all runs with the GIL held, a larger one releases it:
+    both store exactly what ``geom.merge_polyline`` returns for the same inputs."""
+    m = GlobalMap(smoothing=0.5, spacing=1.0)
+    x = np.linspace(0.0, length, int(length / 5.0) + 1)  # (n,)
+    i = m.insert(2, np.stack([x, 0.2 * np.sin(x / 9.0)], axis=1))
+    _, stored = m.get(i)
+    assert (len(stored) + 20 <= 512) == (length < 100.0)
+    det = np.stack([np.linspace(10.0, 30.0, 20), np.full(20, 0.1)], axis=1)  # (20, 2)
+    m.merge(i, det, frame=1)
+    _, merged = m.get(i)
+    np.testing.assert_array_equal(merged, geom.merge_polyline(stored, det, s=0.5, spacing=1.0))
