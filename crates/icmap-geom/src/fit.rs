@@ -371,18 +371,7 @@ fn lsq_fit_cubic_normal(t: &[f64], x: &[[f64; 2]], des: &Design) -> Option<LsqFi
             cur = j0;
         }
         let v = [xy[0] - origin[0], xy[1] - origin[1]];
-        let [h0, h1, h2, h3] = [h[0], h[1], h[2], h[3]];
-        // Row-major upper triangle: (0,0..3), (1,1..3), (2,2..3), (3,3).
-        blk[0] += h0 * h0;
-        blk[1] += h0 * h1;
-        blk[2] += h0 * h2;
-        blk[3] += h0 * h3;
-        blk[4] += h1 * h1;
-        blk[5] += h1 * h2;
-        blk[6] += h1 * h3;
-        blk[7] += h2 * h2;
-        blk[8] += h2 * h3;
-        blk[9] += h3 * h3;
+        add_gram(&mut blk, &[h[0], h[1], h[2], h[3]]);
         for i in 0..K1 {
             bx[i] += h[i] * v[0];
             by[i] += h[i] * v[1];
@@ -447,6 +436,19 @@ fn lsq_fit_cubic_normal(t: &[f64], x: &[[f64; 2]], des: &Design) -> Option<LsqFi
     Some(LsqFit { r, z, c, fp })
 }
 
+/// Adds `h h^T` (4 x 4, symmetric) to `blk`, its upper triangle stored row-major: (0,0..3),
+/// (1,1..3), (2,2..3), (3,3).
+#[inline(always)]
+fn add_gram(blk: &mut [f64; 10], h: &[f64; 4]) {
+    let mut q = 0;
+    for i in 0..4 {
+        for j in i..4 {
+            blk[q] += h[i] * h[j];
+            q += 1;
+        }
+    }
+}
+
 /// The cubic B-splines on `[0, 1]` without interior knots (the Bernstein polynomials) at `x`.
 #[inline(always)]
 fn bernstein3(x: f64) -> [f64; 4] {
@@ -468,16 +470,7 @@ fn fit_cubic_polynomial(u: &[f64], x: &[[f64; 2]]) -> Option<([[f64; 4]; 2], f64
     for (&ui, xy) in u.iter().zip(x) {
         let h = bernstein3(ui);
         let v = [xy[0] - origin[0], xy[1] - origin[1]];
-        a[0] += h[0] * h[0];
-        a[1] += h[0] * h[1];
-        a[2] += h[0] * h[2];
-        a[3] += h[0] * h[3];
-        a[4] += h[1] * h[1];
-        a[5] += h[1] * h[2];
-        a[6] += h[1] * h[3];
-        a[7] += h[2] * h[2];
-        a[8] += h[2] * h[3];
-        a[9] += h[3] * h[3];
+        add_gram(&mut a, &h);
         for i in 0..4 {
             rhs[0][i] += h[i] * v[0];
             rhs[1][i] += h[i] * v[1];
