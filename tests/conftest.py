@@ -29,9 +29,9 @@ def tiny_checkpoint(tmp_path_factory: pytest.TempPathFactory) -> Path:
     for tests of the learned path that need a checkpoint file but not trained weights."""
     import tomllib
     import torch
-    from icmapper.training.checkpoint import save_checkpoint
+    from icmapper.models.checkpoint import save_checkpoint
+    from icmapper.models.network import ICMapperNet
     from icmapper.training.config import config_from_dict, config_to_dict
-    from icmapper.training.objectives import ICMapperNet
 
     repo = Path(__file__).resolve().parents[1]
     raw = tomllib.loads((repo / "configs" / "small.toml").read_text())
@@ -49,7 +49,7 @@ def tiny_checkpoint(tmp_path_factory: pytest.TempPathFactory) -> Path:
     raw["data"]["image_size"] = [32, 88]
     cfg = config_from_dict(raw)
     torch.manual_seed(0)
-    net = ICMapperNet(cfg)
+    net = ICMapperNet(cfg.model, cfg.perception_range)
     path = tmp_path_factory.mktemp("ckpt") / "tiny.pt"
     save_checkpoint(
         path, model=net.state_dict(), optimizer=None, stage=1, step=0, config=config_to_dict(cfg)

@@ -10,14 +10,15 @@ from icmapper.data.types import RANGE_60x30
 from icmapper.models.association import AssociationHead
 from icmapper.models.backbone import ResNetBackbone
 from icmapper.models.bev import TemporalMemory, ViewTransformer, warp_bev
+from icmapper.models.config import ModelConfig
 from icmapper.models.decoder import MapDecoder
-from icmapper.models.detector import DetectorSpec, MapDetector
+from icmapper.models.detector import MapDetector
 from icmapper.models.fusion import FusionModule
 from icmapper.models.propagation import QueryPropagation
 from icmapper.training.synthetic import default_rig
 
 HX, HY = RANGE_60x30.half_x, RANGE_60x30.half_y
-SPEC = DetectorSpec(
+MODEL = ModelConfig(
     backbone_widths=(8, 16),
     backbone_depths=(1, 1),
     channels=32,
@@ -94,7 +95,7 @@ def test_decoder_and_propagation_shapes() -> None:
 
 
 def test_detector_streaming_state() -> None:
-    det = MapDetector(SPEC)
+    det = MapDetector(MODEL)
     k, e = _rig(2, 6, (32, 88))
     img = torch.randint(0, 256, (2, 6, 3, 32, 88), dtype=torch.uint8)
     out, st = det(img, k, e)

@@ -9,10 +9,11 @@ import numpy as np
 import pytest
 import torch
 from icmapper.data.types import ego_to_world, world_to_ego
-from icmapper.training.checkpoint import load_checkpoint, save_checkpoint
+from icmapper.models.checkpoint import load_checkpoint, save_checkpoint
+from icmapper.models.network import ICMapperNet
 from icmapper.training.config import config_from_dict, config_to_dict, load_config
 from icmapper.training.loop import train
-from icmapper.training.objectives import ICMapperNet, Stage1Objective, Stage2Objective
+from icmapper.training.objectives import Stage1Objective, Stage2Objective
 from icmapper.training.synthetic import SyntheticClips, collate_clips
 
 REPO = Path(__file__).resolve().parents[1]
@@ -102,7 +103,7 @@ def test_fake_map_frames_roundtrip() -> None:
 def test_stage1_gradients_reach_trained_modules_only() -> None:
     cfg = _cfg()
     torch.manual_seed(0)
-    net = ICMapperNet(cfg)
+    net = ICMapperNet(cfg.model, cfg.perception_range)
     obj = Stage1Objective(net, cfg)
     losses = obj(_batch(cfg, clip_len=3))
     assert set(losses) == {"loss", "det", "trans", "asso"}
@@ -118,7 +119,7 @@ def test_stage1_gradients_reach_trained_modules_only() -> None:
 def test_stage2_gradients_reach_fusion_only() -> None:
     cfg = _cfg()
     torch.manual_seed(0)
-    net = ICMapperNet(cfg)
+    net = ICMapperNet(cfg.model, cfg.perception_range)
     obj = Stage2Objective(net, cfg, map_factory=FakeMap)
     obj.train()
     assert not net.detector.training and net.fusion.training
@@ -161,7 +162,7 @@ def test_determinism_and_resume(tmp_path: Path) -> None:
 
 def test_checkpoint_roundtrip_and_errors(tmp_path: Path) -> None:
     cfg = _cfg()
-    net = ICMapperNet(cfg)
+    net = ICMapperNet(cfg.model, cfg.perception_range)
     opt = torch.optim.AdamW(net.parameters())
     path = tmp_path / "x" / "ck.pt"
     save_checkpoint(
@@ -174,7 +175,7 @@ def test_checkpoint_roundtrip_and_errors(tmp_path: Path) -> None:
     )
     blob = load_checkpoint(path)
     assert blob["step"] == 7 and config_from_dict(blob["config"]) == cfg
-    net2 = ICMapperNet(_cfg())
+    net2 = ICMapperNet(_cfg().model, _cfg().perception_range)
     net2.load_state_dict(blob["model"])
     for (k, v), (_, w) in zip(net.state_dict().items(), net2.state_dict().items(), strict=True):
         assert torch.equal(v, w), k

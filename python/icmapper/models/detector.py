@@ -12,34 +12,12 @@ from dataclasses import dataclass
 import torch
 from torch import nn
 
+from icmapper.data.types import PerceptionRange, RANGE_60x30
 from icmapper.models.backbone import ResNetBackbone
 from icmapper.models.bev import TemporalMemory, ViewTransformer
+from icmapper.models.config import ModelConfig
 from icmapper.models.decoder import MapDecoder
 from icmapper.models.propagation import QueryPropagation, select_topk
-
-
-@dataclass(frozen=True)
-class DetectorSpec:
-    """Hyper-parameters of the detector (built from the training config's [model] table)."""
-
-    half_x: float = 30.0
-    half_y: float = 15.0
-    num_cameras: int = 6
-    backbone_widths: tuple[int, ...] = (16, 32, 64)
-    backbone_depths: tuple[int, ...] = (1, 1, 1)
-    channels: int = 64
-    bev_x: int = 50
-    bev_y: int = 25
-    heights: tuple[float, ...] = (-1.0, 0.0, 1.0, 2.0)
-    num_queries: int = 30
-    num_layers: int = 3
-    num_points: int = 20
-    num_classes: int = 3
-    heads: int = 4
-    shared_reg: bool = True
-    topk: int = 10
-    temporal: bool = True
-    propagate: bool = True
 
 
 @dataclass
@@ -91,15 +69,17 @@ class DetectorOutput:
 class MapDetector(nn.Module):
     """Backbone + view transformer + temporal memory + decoder + query propagation."""
 
-    def __init__(self, spec: DetectorSpec) -> None:
+    def __init__(self, cfg: ModelConfig, rng: PerceptionRange = RANGE_60x30) -> None:
         super().__init__()
-        self.spec = spec
-        s = spec
+        self.cfg = cfg
+        self.rng = rng
+        s = cfg
+        hx, hy = rng.half_x, rng.half_y
         self.backbone = ResNetBackbone(s.backbone_widths, s.backbone_depths, s.channels)
         self.view = ViewTransformer(
-            s.channels, s.channels, s.bev_x, s.bev_y, s.half_x, s.half_y, s.heights, s.num_cameras
+            s.channels, s.channels, s.bev_x, s.bev_y, hx, hy, s.heights, s.num_cameras
         )
-        self.memory = TemporalMemory(s.channels, s.half_x, s.half_y)
+        self.memory = TemporalMemory(s.channels, hx, hy)
         self.decoder = MapDecoder(
             s.channels,
             s.num_queries,
@@ -109,19 +89,19 @@ class MapDetector(nn.Module):
             s.heads,
             s.shared_reg,
         )
-        self.propagation = QueryPropagation(s.channels, s.half_x, s.half_y)
+        self.propagation = QueryPropagation(s.channels, hx, hy)
         self.register_buffer("pix_mean", torch.tensor([0.45, 0.45, 0.45]).view(1, 3, 1, 1), False)
         self.register_buffer("pix_std", torch.tensor([0.25, 0.25, 0.25]).view(1, 3, 1, 1), False)
 
     # --- conversions -----------------------------------------------------------------------
     def to_metres(self, points01: torch.Tensor) -> torch.Tensor:
         """[0, 1] points (..., 2) -> ego metres (..., 2)."""
-        half = points01.new_tensor([self.spec.half_x, self.spec.half_y])
+        half = points01.new_tensor([self.rng.half_x, self.rng.half_y])
         return (points01 * 2 - 1) * half
 
     def to_unit(self, points_m: torch.Tensor) -> torch.Tensor:
         """Ego metres (..., 2) -> [0, 1] of the range (not clamped)."""
-        half = points_m.new_tensor([self.spec.half_x, self.spec.half_y])
+        half = points_m.new_tensor([self.rng.half_x, self.rng.half_y])
         return (points_m / half + 1) / 2
 
     # --- stages ----------------------------------------------------------------------------
@@ -147,7 +127,7 @@ class MapDetector(nn.Module):
     ) -> torch.Tensor:
         """BEV (B, C, X, Y) of this frame fused with the warped previous BEV."""
         bev = self.view(feats, intrinsics, cam_to_ego, image_size)  # (B, C, X, Y)
-        if not self.spec.temporal or state is None or prev_to_cur is None:
+        if not self.cfg.temporal or state is None or prev_to_cur is None:
             return self.memory(bev, None, None)
         cur_to_prev = torch.linalg.inv(prev_to_cur.float())  # (B, 4, 4)
         return self.memory(bev, state.bev, cur_to_prev)
@@ -174,7 +154,7 @@ class MapDetector(nn.Module):
         bev = self.bev_features(feats, intrinsics, cam_to_ego, image_size, state, prev_to_cur)
         prop_q = prop_p = trans = src = None
         k = 0
-        if self.spec.propagate and state is not None and prev_to_cur is not None:
+        if self.cfg.propagate and state is not None and prev_to_cur is not None:
             prop_q, prop_p = self.propagation(state.queries, state.points, prev_to_cur)
             trans = self.decoder.refine(self.decoder.num_layers_ - 1, prop_q, prop_p)  # (B,k,P,2)
             src, k = state.src_index, int(state.queries.shape[1])
@@ -184,7 +164,7 @@ class MapDetector(nn.Module):
 
     def next_state(self, out: DetectorOutput) -> DetectorState:
         """State for the next frame: the BEV and the top-k queries (by score) of ``out``."""
-        k = min(self.spec.topk, self.spec.num_queries)
+        k = min(self.cfg.topk, self.cfg.num_queries)
         idx = select_topk(out.scores().detach(), k)  # (B, k)
         q = torch.gather(out.queries, 1, idx[..., None].expand(-1, -1, out.queries.shape[-1]))
         pts = out.points[-1]  # (B, Q, P, 2)

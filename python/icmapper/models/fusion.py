@@ -67,6 +67,8 @@ class FusionModule(nn.Module):
     ) -> None:
         super().__init__()
         self.num_points = num_points
+        self.margin = float(margin)  # metres around the range of the sampled history
+        self.history_points = history_points  # points per history instance
         self.scale = (half_x + margin, half_y + margin)
         self.embed_det = PointEmbed(channels, num_points)
         self.embed_hist = PointEmbed(channels, history_points)

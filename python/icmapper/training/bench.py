@@ -14,8 +14,9 @@ from pathlib import Path
 
 import torch
 
+from icmapper.models.network import ICMapperNet
 from icmapper.training.config import TrainConfig, load_config
-from icmapper.training.objectives import ICMapperNet, Stage1Objective, prev_to_cur
+from icmapper.training.objectives import Stage1Objective, prev_to_cur
 from icmapper.training.synthetic import SyntheticClips, collate_clips
 
 
@@ -33,7 +34,7 @@ def _time(fn: Callable[[], object], repeats: int) -> float:
 def bench_training(cfg: TrainConfig, steps: int) -> float:
     """Stage-1 training steps per second at the config's batch size and clip length."""
     torch.manual_seed(cfg.seed)
-    net = ICMapperNet(cfg)
+    net = ICMapperNet(cfg.model, cfg.perception_range)
     obj = Stage1Objective(net, cfg).train()
     opt = torch.optim.AdamW([p for p in obj.parameters() if p.requires_grad], lr=1e-4)
     ds = SyntheticClips(
@@ -59,7 +60,7 @@ def bench_training(cfg: TrainConfig, steps: int) -> float:
 def bench_inference(cfg: TrainConfig, repeats: int) -> dict[str, float]:
     """Per-frame latency (ms, batch 1) of each module on a streaming frame (with state)."""
     torch.manual_seed(cfg.seed)
-    net = ICMapperNet(cfg).eval()
+    net = ICMapperNet(cfg.model, cfg.perception_range).eval()
     det = net.detector
     ds = SyntheticClips(1, 2, cfg.perception_range, cfg.data.image_size, cfg.model.num_cameras)
     b = collate_clips([ds[0]])

@@ -9,37 +9,13 @@ from __future__ import annotations
 
 import dataclasses
 import sys
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from icmapper.data.types import PerceptionRange
-from icmapper.models.detector import DetectorSpec
-
-
-@dataclass(frozen=True)
-class ModelConfig:
-    """Network hyper-parameters (see ``DetectorSpec``, ``AssociationHead``, ``FusionModule``)."""
-
-    num_cameras: int = 6
-    backbone_widths: tuple[int, ...] = (16, 32, 64)
-    backbone_depths: tuple[int, ...] = (1, 1, 1)
-    channels: int = 64
-    bev_x: int = 50
-    bev_y: int = 25
-    heights: tuple[float, ...] = (-1.0, 0.0, 1.0, 2.0)
-    num_queries: int = 30
-    num_layers: int = 3
-    num_points: int = 20
-    num_classes: int = 3
-    heads: int = 4
-    shared_reg: bool = True
-    topk: int = 10
-    temporal: bool = True
-    propagate: bool = True
-    fusion_layers: int = 3
-    fusion_margin: float = 20.0
-    fusion_history_points: int = 20
+from icmapper.models.config import ModelConfig
+from icmapper.settings import from_table, to_plain
 
 
 @dataclass(frozen=True)
@@ -106,90 +82,13 @@ class TrainConfig:
     def perception_range(self) -> PerceptionRange:
         return PerceptionRange.from_name(self.data.range)
 
-    def detector_spec(self) -> DetectorSpec:
-        """The detector hyper-parameters of this config."""
-        m, r = self.model, self.perception_range
-        return DetectorSpec(
-            half_x=r.half_x,
-            half_y=r.half_y,
-            num_cameras=m.num_cameras,
-            backbone_widths=m.backbone_widths,
-            backbone_depths=m.backbone_depths,
-            channels=m.channels,
-            bev_x=m.bev_x,
-            bev_y=m.bev_y,
-            heights=m.heights,
-            num_queries=m.num_queries,
-            num_layers=m.num_layers,
-            num_points=m.num_points,
-            num_classes=m.num_classes,
-            heads=m.heads,
-            shared_reg=m.shared_reg,
-            topk=m.topk,
-            temporal=m.temporal,
-            propagate=m.propagate,
-        )
-
 
 _TABLES = {"model": ModelConfig, "data": DataConfig, "stage1": Stage1Config, "stage2": Stage2Config}
 
 
-def _convert(cls_name: str, f: dataclasses.Field, value: Any) -> Any:
-    """Checks and converts one TOML value to the field's type."""
-    key = f"{cls_name}.{f.name}"
-    default = f.default if f.default is not dataclasses.MISSING else None
-    if isinstance(default, bool):
-        if not isinstance(value, bool):
-            raise ValueError(f"config key {key} must be true/false, got {value!r}")
-        return value
-    if isinstance(default, int):
-        if isinstance(value, bool) or not isinstance(value, int):
-            raise ValueError(f"config key {key} must be an integer, got {value!r}")
-        return value
-    if isinstance(default, float):
-        if isinstance(value, bool) or not isinstance(value, int | float):
-            raise ValueError(f"config key {key} must be a number, got {value!r}")
-        return float(value)
-    if isinstance(default, str):
-        if not isinstance(value, str):
-            raise ValueError(f"config key {key} must be a string, got {value!r}")
-        return value
-    if isinstance(default, tuple):
-        if not isinstance(value, list) or not value:
-            raise ValueError(f"config key {key} must be a non-empty list, got {value!r}")
-        elem = type(default[0])
-        out = []
-        for v in value:
-            if elem is float and isinstance(v, int | float) and not isinstance(v, bool):
-                out.append(float(v))
-            elif elem is int and isinstance(v, int) and not isinstance(v, bool):
-                out.append(v)
-            else:
-                raise ValueError(f"config key {key} must hold {elem.__name__}s, got {v!r}")
-        return tuple(out)
-    raise ValueError(f"config key {key}: unsupported type")  # pragma: no cover
-
-
-def _build(cls: type, table: dict[str, Any], prefix: str) -> Any:
-    names = {f.name: f for f in fields(cls)}
-    unknown = sorted(set(table) - set(names))
-    if unknown:
-        raise ValueError(f"unknown config key(s) in [{prefix}]: {', '.join(unknown)}")
-    kwargs = {k: _convert(prefix, names[k], v) for k, v in table.items()}
-    return cls(**kwargs)
-
-
 def _validate(cfg: TrainConfig) -> None:
-    m, d, s1, s2 = cfg.model, cfg.data, cfg.stage1, cfg.stage2
+    d, s1, s2 = cfg.data, cfg.stage1, cfg.stage2
     positive = {
-        "model.channels": m.channels,
-        "model.bev_x": m.bev_x,
-        "model.bev_y": m.bev_y,
-        "model.num_queries": m.num_queries,
-        "model.num_layers": m.num_layers,
-        "model.num_points": m.num_points,
-        "model.num_cameras": m.num_cameras,
-        "model.fusion_layers": m.fusion_layers,
         "data.clip_len": d.clip_len,
         "stage1.batch_size": s1.batch_size,
         "stage1.lr": s1.lr,
@@ -201,12 +100,6 @@ def _validate(cfg: TrainConfig) -> None:
     for key, v in positive.items():
         if not v > 0:
             raise ValueError(f"config key {key} must be positive, got {v}")
-    if m.channels % m.heads:
-        raise ValueError(f"model.channels ({m.channels}) must be divisible by model.heads")
-    if not 0 <= m.topk <= m.num_queries:
-        raise ValueError(f"model.topk must be in [0, num_queries], got {m.topk}")
-    if len(m.backbone_widths) != len(m.backbone_depths) or len(m.backbone_widths) < 2:
-        raise ValueError("model.backbone_widths and backbone_depths must have equal length >= 2")
     if len(d.image_size) != 2 or min(d.image_size) < 16:
         raise ValueError(f"data.image_size must be [H, W] >= 16, got {list(d.image_size)}")
     if d.num_workers < 0:
@@ -228,16 +121,8 @@ def config_from_dict(raw: dict[str, Any]) -> TrainConfig:
     for name in _TABLES:
         if name in raw and not isinstance(raw[name], dict):
             raise ValueError(f"config [{name}] must be a table")
-    tables = {name: _build(cls, raw.get(name, {}), name) for name, cls in _TABLES.items()}
-    base = (
-        _build(
-            TrainConfig,
-            top,
-            "top level",
-        )
-        if top
-        else TrainConfig()
-    )
+    tables = {name: from_table(cls, raw.get(name, {}), name) for name, cls in _TABLES.items()}
+    base = from_table(TrainConfig, top, "top level") if top else TrainConfig()
     cfg = dataclasses.replace(base, **tables)
     _validate(cfg)
     return cfg
@@ -262,12 +147,4 @@ def load_config(path: str | Path) -> TrainConfig:
 
 def config_to_dict(cfg: TrainConfig) -> dict[str, Any]:
     """Plain nested dict (tuples as lists) of a config; ``config_from_dict`` inverts it."""
-
-    def plain(v: Any) -> Any:
-        if isinstance(v, tuple):
-            return [plain(x) for x in v]
-        if isinstance(v, dict):
-            return {k: plain(x) for k, x in v.items()}
-        return v
-
-    return plain(dataclasses.asdict(cfg))
+    return to_plain(cfg)

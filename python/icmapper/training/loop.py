@@ -24,10 +24,11 @@ import torch
 from torch.nn.parallel import DistributedDataParallel
 from torch.utils.data import DataLoader, Dataset
 
-from icmapper.training.checkpoint import load_checkpoint, save_checkpoint
+from icmapper.models.checkpoint import load_checkpoint, save_checkpoint
+from icmapper.models.network import ICMapperNet
 from icmapper.training.config import TrainConfig, config_to_dict
 from icmapper.training.distributed import DistInfo, barrier, init_distributed, mean_over_ranks
-from icmapper.training.objectives import ICMapperNet, Stage1Objective, Stage2Objective
+from icmapper.training.objectives import Stage1Objective, Stage2Objective
 from icmapper.training.synthetic import SyntheticClips, collate_clips
 
 
@@ -191,7 +192,7 @@ def train(
     out = Path(out_dir)
     info = init_distributed()
     seed_everything(cfg.seed)
-    net = ICMapperNet(cfg).to(info.device)
+    net = ICMapperNet(cfg.model, cfg.perception_range).to(info.device)
     ckpt_path = out / f"stage{stage}.pt"
     start = 0
     opt_state = None

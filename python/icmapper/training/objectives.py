@@ -1,6 +1,5 @@
-"""The networks of icmapper in one module, and the two training objectives.
+"""The two training objectives of ``ICMapperNet`` (icmapper.models.network).
 
-``ICMapperNet`` holds detector, association and fusion (one state dict for checkpoints).
 ``Stage1Objective``: detector + association on clips -> L_det + alpha L_trans + beta L_asso.
 ``Stage2Objective``: fusion on sequences with the global map built online (Rust engine) while
 detector and association stay frozen -> lambda L_fusion.
@@ -18,9 +17,7 @@ import torch
 from torch import nn
 
 from icmapper.data.types import ego_to_world, pose_to_xy_yaw
-from icmapper.models.association import AssociationHead
 from icmapper.models.detector import DetectorOutput, DetectorState, MapDetector
-from icmapper.models.fusion import FusionModule
 from icmapper.models.losses import (
     DetectionCriterion,
     FrameMatch,
@@ -29,30 +26,9 @@ from icmapper.models.losses import (
     fusion_loss,
     trans_loss,
 )
+from icmapper.models.network import ICMapperNet
 from icmapper.models.propagation import select_topk, transform_points
 from icmapper.training.config import TrainConfig
-
-
-class ICMapperNet(nn.Module):
-    """detector (MapDetector), association (AssociationHead), fusion (FusionModule)."""
-
-    def __init__(self, cfg: TrainConfig) -> None:
-        super().__init__()
-        spec = cfg.detector_spec()
-        m = cfg.model
-        self.detector = MapDetector(spec)
-        self.association = AssociationHead(m.channels, m.num_points)
-        self.fusion = FusionModule(
-            m.channels,
-            m.num_points,
-            spec.half_x,
-            spec.half_y,
-            margin=m.fusion_margin,
-            num_layers=m.fusion_layers,
-            heads=m.heads,
-            num_classes=m.num_classes,
-            history_points=m.fusion_history_points,
-        )
 
 
 def prev_to_cur(poses: torch.Tensor, t: int) -> torch.Tensor:
@@ -118,7 +94,7 @@ class Stage1Objective(nn.Module):
         q_all = out.queries.shape[1]
         ids = torch.full((q_all,), -1, dtype=torch.int64, device=out.queries.device)
         ids[match.pred_idx] = match.gt_ids
-        top = select_topk(out.scores()[b : b + 1].detach(), det.spec.topk)[0]  # (k,)
+        top = select_topk(out.scores()[b : b + 1].detach(), det.cfg.topk)[0]  # (k,)
         slots = torch.unique(torch.cat([match.pred_idx, top]))  # (D,)
         trk = prev_match.pred_idx  # (T,)
         p_det = out.points[-1][b, slots]  # (D, P, 2)

@@ -73,7 +73,7 @@ def load_checkpoint(path: str | Path, map_location: str | torch.device = "cpu") 
 
 def export_checkpoint(src: str | Path, dst: str | Path) -> None:
     """Writes an inference checkpoint: ``src`` without optimizer and RNG state (smaller; what the
-    Mapper needs), atomically. Usage: ``python -m icmapper.training.checkpoint SRC DST``."""
+    Mapper needs), atomically. Usage: ``python -m icmapper.models.checkpoint SRC DST``."""
     blob = load_checkpoint(src)
     save_checkpoint(
         dst,
@@ -89,5 +89,5 @@ if __name__ == "__main__":  # pragma: no cover
     import sys
 
     if len(sys.argv) != 3:
-        sys.exit("usage: python -m icmapper.training.checkpoint SRC DST")
+        sys.exit("usage: python -m icmapper.models.checkpoint SRC DST")
     export_checkpoint(sys.argv[1], sys.argv[2])

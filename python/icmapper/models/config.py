@@ -1,0 +1,55 @@
+"""The network's settings: one frozen dataclass, ``ModelConfig``, the ``[model]`` table of a
+training config and of every checkpoint. The detector, the association head and the fusion module
+are all built from it (``icmapper.models.network.ICMapperNet``); nothing else restates them.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class ModelConfig:
+    """Network hyper-parameters (with the perception range, everything the networks are built
+    from). Range checks run on construction (ValueError naming the key)."""
+
+    num_cameras: int = 6
+    backbone_widths: tuple[int, ...] = (16, 32, 64)
+    backbone_depths: tuple[int, ...] = (1, 1, 1)
+    channels: int = 64
+    bev_x: int = 50  # BEV cells along x (forward)
+    bev_y: int = 25  # BEV cells along y (left)
+    heights: tuple[float, ...] = (-1.0, 0.0, 1.0, 2.0)  # metres sampled per BEV pillar
+    num_queries: int = 30
+    num_layers: int = 3  # decoder layers
+    num_points: int = 20  # points per instance
+    num_classes: int = 3
+    heads: int = 4
+    shared_reg: bool = True  # one regression head shared by the decoder layers
+    topk: int = 10  # queries propagated to the next frame
+    temporal: bool = True  # BEV memory (GRU) across frames
+    propagate: bool = True  # query propagation (U_MLP) across frames
+    fusion_layers: int = 3
+    fusion_margin: float = 20.0  # metres around the range from which history is sampled
+    fusion_history_points: int = 20  # points per sampled history instance
+
+    def __post_init__(self) -> None:
+        positive = (
+            "channels", "bev_x", "bev_y", "num_queries", "num_layers", "num_points",
+            "num_cameras", "fusion_layers", "fusion_history_points", "heads",
+        )  # fmt: skip
+        for key in positive:
+            if not getattr(self, key) > 0:
+                raise ValueError(
+                    f"config key model.{key} must be positive, got {getattr(self, key)}"
+                )
+        if self.channels % self.heads:
+            raise ValueError(f"model.channels ({self.channels}) must be divisible by model.heads")
+        if not 0 <= self.topk <= self.num_queries:
+            raise ValueError(f"model.topk must be in [0, num_queries], got {self.topk}")
+        if len(self.backbone_widths) != len(self.backbone_depths) or len(self.backbone_widths) < 2:
+            raise ValueError(
+                "model.backbone_widths and backbone_depths must have equal length >= 2"
+            )
+        if not self.fusion_margin >= 0:
+            raise ValueError(f"model.fusion_margin must be >= 0, got {self.fusion_margin}")
