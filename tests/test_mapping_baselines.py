@@ -6,12 +6,17 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from icmapper.data.types import FrameGT, Sequence, WorldMap, xy_yaw_to_pose
-from icmapper.mapping.baselines import BASELINES, ClusterFit, PolyMerge, PostTrack, VmaMerge
+from icmapper.data.types import FrameGT, RANGE_60x30, Sequence, WorldMap, xy_yaw_to_pose
+from icmapper.mapping.baselines import ClusterFit, PostTrack
 from icmapper.mapping.baselines.cluster_fit import dbscan
 from icmapper.mapping.baselines.splice import overlap_fraction, splice_polyline
+from icmapper.mapping.config import MapperConfig
+from icmapper.mapping.methods import methods
 from icmapper.mapping.oracle import OracleDetector
 from icmapper.mapping.types import Detections
+
+#: The registered methods that run on any detection source (the baselines).
+BASELINES = {n: i.build for n, i in methods().items() if i.build is not None}
 
 # --- the hand-made drive ----------------------------------------------------------------------
 # A straight road along the local x axis, rotated by YAW into the world. The ego drives from x = 0
@@ -133,7 +138,7 @@ def _run(method, seq: Sequence):
 
 
 def _make(name: str, source) -> object:
-    return BASELINES[name](source, score_threshold=0.6)
+    return BASELINES[name](source, MapperConfig(baseline_threshold=0.6), RANGE_60x30)
 
 
 # --- rule-based pieces (no engine needed) -----------------------------------------------------
@@ -202,13 +207,13 @@ def test_baseline_track_ids(name: str) -> None:
     pairs: set[tuple[int, int]] = set()
     for i in range(len(seq)):
         res = method.step(seq.frame(i, with_images=False))
-        if name == "cluster_fit":
+        if name == "cluster-fit":
             assert np.all(res.track_ids == -1)
             continue
         assert np.all(res.track_ids >= 0)
         pairs |= set(zip(res.detections.gt_ids.tolist(), res.track_ids.tolist(), strict=True))
     gmap = method.finish()
-    if name in ("post_track", "vma_merge"):
+    if name in ("post-track", "vma"):
         gt_of = dict(pairs)
         assert len(pairs) == len(gt_of) == len({v for _, v in pairs}) == 5
         assert len(gmap) == 5
@@ -269,13 +274,29 @@ def _snapshot(method) -> dict:
     return out
 
 
-def test_constructors_validate() -> None:
-    src = _ScriptedSource({})
-    with pytest.raises(ValueError, match="gate"):
-        PostTrack(src, gate=0.0)
-    with pytest.raises(ValueError, match="overlap"):
-        VmaMerge(src, overlap=-1.0)
-    with pytest.raises(ValueError, match="buffer"):
-        PolyMerge(src, buffer=0.0)
-    with pytest.raises(ValueError, match="score_threshold"):
-        ClusterFit(src, score_threshold=2.0)
+def test_registry_lists_every_baseline_once() -> None:
+    assert list(BASELINES) == ["post-track", "vma", "cluster-fit", "polymerge"]
+    for name, build in BASELINES.items():
+        assert getattr(build, "name", None) == name  # one spelling per method
+
+
+def test_settings_validate() -> None:
+    for bad in (
+        {"gate": 0.0},
+        {"vma_overlap": -1.0},
+        {"polymerge_buffer": 0.0},
+        {"baseline_threshold": 2.0},
+        {"cluster_min_samples": 0},
+    ):
+        with pytest.raises(ValueError, match=next(iter(bad))):
+            MapperConfig(**bad)
+
+
+def test_settings_reach_every_baseline() -> None:
+    # a setting chosen once reaches each baseline's map and threshold
+    cfg = MapperConfig(smoothing=0.9, spacing=2.0, baseline_threshold=0.7)
+    for name, build in BASELINES.items():
+        method = build(_ScriptedSource({}), cfg, RANGE_60x30)
+        assert method.score_threshold == 0.7, name
+        if name != "cluster-fit":  # cluster-fit builds its map at the end
+            assert method.map.smoothing == 0.9 and method.map.spacing == 2.0, name

@@ -19,7 +19,8 @@ from icmapper.data.gt import global_gt, sequence_gt
 from icmapper.data.sources import open_source
 from icmapper.data.types import Frame, FrameGT, RANGE_60x30, Sequence
 from icmapper.eval.globalmap import dense_sample, map_cd
-from icmapper.mapping.mapper import Mapper, MapperConfig
+from icmapper.mapping.config import MapperConfig
+from icmapper.mapping.mapper import Mapper
 from icmapper.mapping.oracle import OracleDetector
 from icmapper.mapping.types import Detections, StepResult
 from numpy.typing import NDArray

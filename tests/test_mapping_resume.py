@@ -13,7 +13,9 @@ import numpy as np
 import pytest
 from icmapper.data.sources import open_source
 from icmapper.data.types import Sequence
-from icmapper.mapping.mapper import Mapper, MapperConfig, state_path
+from icmapper.mapping.config import MapperConfig
+from icmapper.mapping.mapper import Mapper
+from icmapper.mapping.state import state_path
 from icmapper.mapping.types import StepResult
 
 REPO = Path(__file__).resolve().parents[1]

@@ -237,8 +237,9 @@ def frame_gt(
 
 def sequence_gt(seq: Sequence, rng: PerceptionRange) -> list[FrameGT]:
     """Per-frame GT of a whole sequence, ids stable over the sequence. Sources with identity
-    (sim, av2) link pieces of world instances (`PieceIds`); nuScenes derives ids by matching."""
-    if seq.source == "nuscenes":
+    (sim, av2) link pieces of world instances (`PieceIds`); sources without identity
+    (``seq.gt_ids_by_matching``: nuScenes) derive ids by matching."""
+    if seq.gt_ids_by_matching:
         frames = [frame_gt(seq.world, p, rng) for p in seq.poses]
         return derive_ids_by_matching(frames, seq.poses)
     tracker = PieceIds()

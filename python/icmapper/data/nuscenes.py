@@ -256,7 +256,7 @@ def load_nuscenes(
             maps[location] = _MapLayers(root / "maps" / "expansion" / f"{location}.json")
         world = _scene_world(maps[location], name, poses)
         renderer = LazyRenderer(world, rig, poses, seed) if render else None
-        out.append(Sequence(name, "nuscenes", world, timestamps, poses, rig, renderer))
+        out.append(Sequence(name, "nuscenes", world, timestamps, poses, rig, renderer, True))
     return out
 
 

@@ -1,5 +1,7 @@
 """Source specs: one string names a list of sequences, so runs and evaluations can recompute
-their inputs and ground truth.
+their inputs and ground truth. Each kind is one ``SourceKind`` in the ``SOURCE_KINDS`` registry: a
+new dataset is a module with an opener plus one ``register_source`` call; the command line's help
+and errors list the registry.
 
     sim:val            4 synthetic validation drives (cities of sim.CITY_SEEDS["val"])
     sim:<split>:N      N synthetic drives of split train / val / test
@@ -13,6 +15,9 @@ their inputs and ground truth.
 
 from __future__ import annotations
 
+import re
+from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 
 from icmapper.data.types import Sequence
@@ -40,6 +45,47 @@ def _nuscenes_version(root: Path) -> str:
     return found[0]
 
 
+@dataclass(frozen=True)
+class SourceOptions:
+    """What every source kind's opener gets besides the spec: the image size (H, W) of rendered
+    images, the seed of synthetic drives and renderers, a split file, and whether to render."""
+
+    image_size: tuple[int, int] = (128, 352)
+    seed: int = 0
+    split_file: str | Path | None = None
+    render: bool = True
+
+
+@dataclass(frozen=True)
+class SourceKind:
+    """One kind of source spec ("KIND:REST"): ``usage`` and ``help`` for errors and the command
+    line; ``open(spec, rest, options)`` returns the sequences; ``path_tag``: the spec names a
+    path on disk (run folders are named after its last component)."""
+
+    name: str
+    usage: str
+    help: str
+    open: Callable[[str, str, SourceOptions], list[Sequence]]
+    path_tag: bool = False
+
+
+#: Registered source kinds by name (``register_source``), in registration order.
+SOURCE_KINDS: dict[str, SourceKind] = {}
+
+
+def register_source(kind: SourceKind) -> SourceKind:
+    """Adds a source kind (a new dataset: one module with an opener + this one call)."""
+    if kind.name in SOURCE_KINDS:
+        raise ValueError(f"source kind {kind.name!r} is registered twice")
+    SOURCE_KINDS[kind.name] = kind
+    return kind
+
+
+def sources_help() -> str:
+    """One line per registered kind: usage and help (for the command line and errors)."""
+    return "\n".join(f"  {k.usage:<24} {k.help}" for k in SOURCE_KINDS.values())
+
+
 def open_source(
     spec: str,
     image_size: tuple[int, int] = (128, 352),
@@ -49,66 +95,112 @@ def open_source(
 ) -> list[Sequence]:
     """The sequences a spec names (see the module docstring). Raises ValueError for a bad spec
     and DataError (a ValueError) for missing or broken data."""
+    usages = ", ".join(repr(k.usage) for k in SOURCE_KINDS.values())
     if not isinstance(spec, str) or ":" not in spec:
+        raise ValueError(f"bad source spec {spec!r}: expected one of {usages}")
+    name, rest = spec.split(":", 1)
+    kind = SOURCE_KINDS.get(name)
+    if kind is None:
         raise ValueError(
-            f"bad source spec {spec!r}: expected 'sim:val', 'sim:<split>:N', 'av2:PATH', "
-            "'av2-drives:PATH:N' or 'nuscenes:PATH[:split]'"
+            f"bad source spec {spec!r}: unknown kind {name!r} ({', '.join(SOURCE_KINDS)})"
         )
-    kind, rest = spec.split(":", 1)
-    if kind == "sim":
-        from icmapper.data import sim
+    return kind.open(spec, rest, SourceOptions(image_size, seed, split_file, render))
 
-        parts = rest.split(":")
-        if parts[0] not in SIM_SPLITS or len(parts) > 2:
-            raise ValueError(f"bad source spec {spec!r}: expected sim:<{'|'.join(SIM_SPLITS)}>[:N]")
-        n = _count(parts[1], spec) if len(parts) == 2 else DEFAULT_SIM_COUNT
-        return list(sim.sim_sequences(parts[0], n, seed=seed, image_size=image_size))
-    if kind == "av2":
-        from icmapper.data import av2
 
-        if not rest:
-            raise ValueError(f"bad source spec {spec!r}: no path")
-        return [
-            av2.load_av2_sequence(log, image_size=image_size, render=render, seed=seed)
-            for log in av2.find_av2_logs(rest)
-        ]
-    if kind == "av2-drives":
-        from icmapper.data import av2
+def source_tag(spec: str) -> str:
+    """A folder name for a spec's run: "sim-val-4", "av2-<last path component>", ..."""
+    name, _, rest = spec.partition(":")
+    kind = SOURCE_KINDS.get(name)
+    if kind is not None and kind.path_tag:
+        rest = Path(rest.split(":")[0]).name or "data"
+    return re.sub(r"[^A-Za-z0-9_.-]+", "-", f"{name}-{rest}").strip("-")
 
-        path, _, n = rest.rpartition(":")
-        if not path:
-            raise ValueError(f"bad source spec {spec!r}: expected av2-drives:PATH:N")
-        num = _count(n, spec)
-        return [
-            s
-            for log in av2.find_av2_logs(path)
-            for s in av2.av2_drives(log, num, seed=seed, image_size=image_size, render=render)
-        ]
-    if kind == "nuscenes":
-        from icmapper.data import nuscenes
 
-        path, split = rest, None
-        if not Path(rest).is_dir() and ":" in rest:
-            path, split = rest.rsplit(":", 1)
-        root = Path(path)
-        if not root.is_dir():
-            raise ValueError(f"bad source spec {spec!r}: {root} is not a directory")
-        if split is not None and split_file is None:
-            split_file = root / "splits.json"
-            if not split_file.is_file():
-                raise ValueError(
-                    f"source {spec!r} names split {split!r} but no split file was given "
-                    f"(split_file=...) and {split_file} does not exist"
-                )
-        return nuscenes.load_nuscenes(
-            root,
-            version=_nuscenes_version(root),
-            split_file=split_file if split is not None else None,
-            split=split,
-            image_size=image_size,
-            render=render,
-            seed=seed,
-        )
-    raise ValueError(
-        f"bad source spec {spec!r}: unknown kind {kind!r} (sim, av2, av2-drives, nuscenes)"
+# ---------------------------------------------------------------------- the built-in kinds
+def _open_sim(spec: str, rest: str, o: SourceOptions) -> list[Sequence]:
+    from icmapper.data import sim
+
+    parts = rest.split(":")
+    if parts[0] not in SIM_SPLITS or len(parts) > 2:
+        raise ValueError(f"bad source spec {spec!r}: expected sim:<{'|'.join(SIM_SPLITS)}>[:N]")
+    n = _count(parts[1], spec) if len(parts) == 2 else DEFAULT_SIM_COUNT
+    return list(sim.sim_sequences(parts[0], n, seed=o.seed, image_size=o.image_size))
+
+
+def _open_av2(spec: str, rest: str, o: SourceOptions) -> list[Sequence]:
+    from icmapper.data import av2
+
+    if not rest:
+        raise ValueError(f"bad source spec {spec!r}: no path")
+    return [
+        av2.load_av2_sequence(log, image_size=o.image_size, render=o.render, seed=o.seed)
+        for log in av2.find_av2_logs(rest)
+    ]
+
+
+def _open_av2_drives(spec: str, rest: str, o: SourceOptions) -> list[Sequence]:
+    from icmapper.data import av2
+
+    path, _, n = rest.rpartition(":")
+    if not path:
+        raise ValueError(f"bad source spec {spec!r}: expected av2-drives:PATH:N")
+    num = _count(n, spec)
+    return [
+        s
+        for log in av2.find_av2_logs(path)
+        for s in av2.av2_drives(log, num, seed=o.seed, image_size=o.image_size, render=o.render)
+    ]
+
+
+def _open_nuscenes(spec: str, rest: str, o: SourceOptions) -> list[Sequence]:
+    from icmapper.data import nuscenes
+
+    path, split = rest, None
+    if not Path(rest).is_dir() and ":" in rest:
+        path, split = rest.rsplit(":", 1)
+    root = Path(path)
+    if not root.is_dir():
+        raise ValueError(f"bad source spec {spec!r}: {root} is not a directory")
+    split_file = o.split_file
+    if split is not None and split_file is None:
+        split_file = root / "splits.json"
+        if not split_file.is_file():
+            raise ValueError(
+                f"source {spec!r} names split {split!r} but no split file was given "
+                f"(split_file=...) and {split_file} does not exist"
+            )
+    return nuscenes.load_nuscenes(
+        root,
+        version=_nuscenes_version(root),
+        split_file=split_file if split is not None else None,
+        split=split,
+        image_size=o.image_size,
+        render=o.render,
+        seed=o.seed,
     )
+
+
+register_source(
+    SourceKind("sim", "sim:<split>[:N]", "N synthetic drives (split train|val|test)", _open_sim)
+)
+register_source(
+    SourceKind("av2", "av2:PATH", "an Argoverse 2 log, or every log in a folder", _open_av2, True)
+)
+register_source(
+    SourceKind(
+        "av2-drives",
+        "av2-drives:PATH:N",
+        "N synthetic drives along the lane graph of each AV2 log under PATH",
+        _open_av2_drives,
+        True,
+    )
+)
+register_source(
+    SourceKind(
+        "nuscenes",
+        "nuscenes:PATH[:split]",
+        "the scenes of a nuScenes dataroot (a split needs a split file)",
+        _open_nuscenes,
+        True,
+    )
+)

@@ -135,6 +135,8 @@ class Sequence:
     it drives through (ground truth with identity) and, optionally, a renderer of its images.
 
     render(i) -> (C, 3, H, W) uint8 images of frame i (None: the source has no images).
+    gt_ids_by_matching: the world's instances carry no identity usable across frames (nuScenes):
+    ground-truth ids are derived by matching consecutive frames (``gt.derive_ids_by_matching``).
     """
 
     name: str
@@ -144,6 +146,7 @@ class Sequence:
     poses: NDArray[np.float64]
     rig: CameraRig
     render: Callable[[int], NDArray[np.uint8]] | None = None
+    gt_ids_by_matching: bool = False
 
     def __len__(self) -> int:
         return int(self.timestamps.shape[0])

@@ -36,7 +36,7 @@ def main(argv: list[str] | None = None) -> int:
         ckpt = _fresh_checkpoint(args.config)
         print(f"(no checkpoint: timing a freshly initialised network of {args.config})")
     mapper = Mapper.from_checkpoint(ckpt)
-    from icmapper.training.checkpoint import load_checkpoint
+    from icmapper.models.checkpoint import load_checkpoint
     from icmapper.training.config import config_from_dict
 
     cfg = config_from_dict(load_checkpoint(ckpt)["config"])
@@ -74,12 +74,12 @@ def main(argv: list[str] | None = None) -> int:
 def _fresh_checkpoint(config: str) -> str:
     import tempfile
 
-    from icmapper.training.checkpoint import save_checkpoint
+    from icmapper.models.checkpoint import save_checkpoint
+    from icmapper.models.network import ICMapperNet
     from icmapper.training.config import config_to_dict, load_config
-    from icmapper.training.objectives import ICMapperNet
 
     cfg = load_config(config)
-    net = ICMapperNet(cfg)
+    net = ICMapperNet(cfg.model, cfg.perception_range)
     path = Path(tempfile.mkdtemp()) / "fresh.pt"
     save_checkpoint(
         path, model=net.state_dict(), optimizer=None, stage=1, step=0, config=config_to_dict(cfg)

@@ -6,23 +6,19 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import re
 import sys
 import time
+from dataclasses import fields
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from icmapper.mapping.run import METHODS
+from icmapper.data.sources import source_tag
+
+if TYPE_CHECKING:
+    from icmapper.mapping.config import MapperConfig
+
 
 DEFAULT_CHECKPOINT = Path(__file__).resolve().parents[3] / "checkpoints" / "small.pt"
-
-
-def _source_tag(spec: str) -> str:
-    kind = spec.split(":", 1)[0]
-    rest = spec.split(":", 1)[1] if ":" in spec else ""
-    if kind in ("av2", "nuscenes", "av2-drives"):
-        rest = Path(rest.split(":")[0]).name or "data"
-    return re.sub(r"[^A-Za-z0-9_.-]+", "-", f"{kind}-{rest}").strip("-")
 
 
 def _open(spec: str, image_size: tuple[int, int], seed: int, render: bool) -> list[Any]:
@@ -35,12 +31,28 @@ def _image_size(args: argparse.Namespace) -> tuple[int, int]:
     if args.image_size:
         return tuple(args.image_size)  # type: ignore[return-value]
     if args.detections == "learned" and args.checkpoint:
-        from icmapper.training.checkpoint import load_checkpoint
-        from icmapper.training.config import config_from_dict
+        from icmapper.models.network import checkpoint_settings
 
-        cfg = config_from_dict(load_checkpoint(args.checkpoint)["config"])
-        return tuple(cfg.data.image_size)  # type: ignore[return-value]
+        return checkpoint_settings(args.checkpoint)[1]
     return (64, 176)
+
+
+def mapper_config(args: argparse.Namespace) -> MapperConfig:
+    """The run's ``MapperConfig``: the defaults (with the learned detector, its checkpoint's
+    detection threshold), then the named flags, then ``--set NAME=VALUE`` items."""
+    from icmapper.mapping.config import CLI_FLAGS, MapperConfig
+    from icmapper.settings import parse_assignments
+
+    base = MapperConfig()
+    if args.detections == "learned" and args.checkpoint:
+        from icmapper.models.network import checkpoint_threshold
+
+        base = MapperConfig(detect_threshold=checkpoint_threshold(args.checkpoint))
+    table: dict[str, Any] = {
+        name: getattr(args, name) for name in CLI_FLAGS if getattr(args, name) is not None
+    }
+    table.update(parse_assignments(args.set or []))
+    return MapperConfig.from_dict(table, base)
 
 
 def run_methods(
@@ -54,23 +66,24 @@ def run_methods(
     device: str = "cpu",
     progress: bool = True,
     pictures: bool = True,
+    config: MapperConfig | None = None,
 ) -> list[Path]:
-    """Runs ``methods`` on the sequences of ``source``; one run folder per method under ``out``.
-    Returns the run folders."""
+    """Runs ``methods`` on the sequences of ``source``, all under one ``config``; one run folder
+    per method under ``out`` (with the config it ran with: ``mapper_config.json``). Returns the
+    run folders."""
     from tqdm import tqdm
 
     from icmapper.data import gt as gt_mod
     from icmapper.eval.runfmt import RunWriter
     from icmapper.mapping.plot import plot_global_maps
-    from icmapper.mapping.run import DetectorSpec, map_sequence, method_factory
-    from icmapper.training.config import config_from_dict  # noqa: F401  (fail early if torch missing)
+    from icmapper.mapping.run import DetectionInput, map_sequence, method_factory
 
-    spec = DetectorSpec.parse(detections, checkpoint, device, seed)
-    rng = _range_of(spec)
-    seqs = _open(source, image_size, seed, render=spec.needs_images)
+    inp = DetectionInput.parse(detections, checkpoint, device, seed)
+    rng = _range_of(inp)
+    seqs = _open(source, image_size, seed, render=inp.needs_images)
     if not seqs:
         raise ValueError(f"source {source!r} has no sequences")
-    factories = {m: method_factory(m, spec, rng) for m in methods}
+    factories = {m: method_factory(m, inp, rng, config) for m in methods}
     out.mkdir(parents=True, exist_ok=True)
     run_dirs = []
     writers = {}
@@ -89,7 +102,7 @@ def run_methods(
             method, recorder = factories[m](seq, records)
             bar.set_postfix_str(f"{seq.name} {m}")
             t0 = time.perf_counter()
-            frames, gmap = map_sequence(method, seq, spec.needs_images, bar)
+            frames, gmap = map_sequence(method, seq, inp.needs_images, bar)
             timings[m] += time.perf_counter() - t0
             if recorder is not None and records is None:
                 records = recorder.records
@@ -106,6 +119,8 @@ def run_methods(
     bar.close()
     for m in methods:
         writers[m].close()
+        used = config.to_dict() if config is not None else {}
+        _write_json_atomic(out / m / "mapper_config.json", used)
         n = sum(len(s) for s in seqs)
         (out / m / "timing.json").write_text(
             json.dumps({"frames": n, "seconds": timings[m], "ms_per_frame": 1e3 * timings[m] / n})
@@ -113,14 +128,19 @@ def run_methods(
     return run_dirs
 
 
-def _range_of(spec: Any) -> Any:
+def _write_json_atomic(path: Path, data: Any) -> None:
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(json.dumps(data, indent=1))
+    os.replace(tmp, path)
+
+
+def _range_of(inp: Any) -> Any:
     from icmapper.data.types import RANGE_60x30
 
-    if spec.checkpoint:
-        from icmapper.training.checkpoint import load_checkpoint
-        from icmapper.training.config import config_from_dict
+    if inp.checkpoint:
+        from icmapper.models.network import checkpoint_settings
 
-        return config_from_dict(load_checkpoint(spec.checkpoint)["config"]).perception_range
+        return checkpoint_settings(inp.checkpoint)[0]
     return RANGE_60x30
 
 
@@ -135,6 +155,7 @@ def cmd_map(args: argparse.Namespace) -> int:
         args.seed,
         args.device,
         not args.no_progress,
+        config=mapper_config(args),
     )
     print(f"wrote {Path(args.out) / args.method}")
     return 0
@@ -144,13 +165,17 @@ def cmd_compare(args: argparse.Namespace) -> int:
     from icmapper.eval.cli import write_json
     from icmapper.eval.evaluate import evaluate_run
     from icmapper.eval.report import markdown
+    from icmapper.mapping.methods import method
 
     methods = args.methods.split(",") if args.methods else list(_default_methods(args))
+    for m in methods:
+        method(m)  # ValueError naming the known methods
+    config = mapper_config(args)
     out = Path(args.out)
     report = []
     all_results = []
     for source in args.source:
-        sub = out / _source_tag(source)
+        sub = out / source_tag(source)
         dirs = run_methods(
             methods,
             source,
@@ -161,6 +186,7 @@ def cmd_compare(args: argparse.Namespace) -> int:
             args.seed,
             args.device,
             not args.no_progress,
+            config=config,
         )
         seqs = _open(source, _image_size(args), args.seed, render=False)
         results = []
@@ -184,9 +210,11 @@ def cmd_compare(args: argparse.Namespace) -> int:
 
 
 def _default_methods(args: argparse.Namespace) -> tuple[str, ...]:
-    if args.detections == "learned":
-        return METHODS
-    return ("icmapper", "post-track", "vma", "cluster-fit", "polymerge")
+    """Every registered method; without the learned detector, those that differ without it."""
+    from icmapper.mapping.methods import methods
+
+    learned = args.detections == "learned"
+    return tuple(n for n, info in methods().items() if learned or not info.learned_only)
 
 
 def _common(p: argparse.ArgumentParser) -> None:
@@ -205,27 +233,56 @@ def _common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--device", default="cpu")
     p.add_argument("--image-size", type=int, nargs=2, metavar=("H", "W"))
     p.add_argument("--no-progress", action="store_true")
+    from icmapper.mapping.config import CLI_FLAGS, MapperConfig
+
+    helps = MapperConfig.help()
+    kinds = {f.name: f.type for f in fields(MapperConfig)}
+    g = p.add_argument_group("mapping settings (icmapper.mapping.config.MapperConfig)")
+    for name in CLI_FLAGS:
+        typ = {"int": int, "float": float}[str(kinds[name])]
+        g.add_argument("--" + name.replace("_", "-"), dest=name, type=typ, help=helps[name])
+    g.add_argument(
+        "--set",
+        action="append",
+        metavar="NAME=VALUE",
+        help="any MapperConfig setting (repeatable): "
+        + "; ".join(f"{n}: {h}" for n, h in helps.items() if n not in CLI_FLAGS),
+    )
 
 
 def register(subparsers: Any) -> None:
+    from icmapper.data.sources import sources_help
+    from icmapper.mapping.methods import methods
+
+    epilog = (
+        "sources:\n"
+        + sources_help()
+        + "\n\nmethods:\n"
+        + "\n".join(f"  {n:<24} {i.help}" for n, i in methods().items())
+    )
     p = subparsers.add_parser(
         "map",
         help="build global maps of a source's sequences with one method",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        epilog=epilog,
         description="Runs one mapping method over sim:SPLIT[:N] | av2:PATH | nuscenes:PATH and "
         "writes a run folder (docs/eval.md), the global maps (.icmap, .geojson) and PNGs.",
     )
-    p.add_argument("--source", required=True)
-    p.add_argument("--method", default="icmapper", choices=METHODS)
+    known = methods()
+    p.add_argument("--source", required=True, help="a source spec (listed below)")
+    p.add_argument("--method", default="icmapper", choices=list(known), metavar="METHOD")
     _common(p)
     p.set_defaults(func=cmd_map)
 
     c = subparsers.add_parser(
         "compare",
         help="run IC-Mapper and the baselines on the same sequences and print the tables",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        epilog=epilog,
         description="Runs every method on the same sequences of each --source, evaluates them "
         "and prints detection, tracking and mapping tables (also OUT/report.md, results.json).",
     )
     c.add_argument("--source", action="append", required=True, help="repeatable")
-    c.add_argument("--methods", help=f"comma-separated subset of {','.join(METHODS)}")
+    c.add_argument("--methods", help=f"comma-separated subset of {','.join(known)}")
     _common(c)
     c.set_defaults(func=cmd_compare)

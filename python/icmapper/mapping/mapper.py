@@ -22,12 +22,7 @@ Per frame (paper Fig. 2):
 
 from __future__ import annotations
 
-import hashlib
-import os
-import tempfile
 import time
-import zipfile
-import zlib
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -43,7 +38,10 @@ from icmapper.data.types import (
     ego_to_world,
     pose_to_xy_yaw,
 )
-from icmapper.mapping.tracker import Track, Tracker, _segments, positional_affinity
+from icmapper.mapping.config import MapperConfig
+from icmapper.mapping.network_source import NetworkDetector
+from icmapper.mapping.reid import reidentify
+from icmapper.mapping.tracker import Tracker, positional_affinity
 from icmapper.mapping.types import Detections, DetectionSource, StepResult
 
 if TYPE_CHECKING:
@@ -51,12 +49,7 @@ if TYPE_CHECKING:
 
     from icmapper._icmap import GlobalMap
     from icmapper.models.association import AssociationHead
-    from icmapper.models.detector import MapDetector
     from icmapper.models.fusion import FusionModule
-
-#: Share of a new track's points that must lie within ``reid_distance`` of a global instance for
-#: the track to take that instance's id.
-REID_MIN_OVERLAP = 0.5
 
 #: The stages of one step, in order (timed in ``MapperStats.seconds``).
 STAGES = ("detector", "association", "tracking", "sampling", "fusion", "merge")
@@ -67,174 +60,47 @@ NETWORK_STAGES = ("detector", "association", "fusion")
 #: they never collide with track ids (the run format needs an id >= 0 for every prediction).
 UNTRACKED_ID_BASE = 1 << 40
 
-#: Format version of the ``Mapper.save_state`` sidecar (``<map>.state.npz``).
-STATE_VERSION = 1
-#: Integer counters of ``MapperStats`` stored in the sidecar, in order.
-_STAT_COUNTS = ("frames", "inserted", "merged", "reidentified", "aliased", "merge_failures")
-#: Arrays every sidecar holds (besides ``source.*``, the detection source's state).
-_STATE_KEYS = (
-    "version", "map_sha256", "source_kind", "next_id", "untracked", "stats_counts",
-    "stats_seconds", "stats_failures", "alias", "track_ids", "track_cls", "track_age",
-    "track_hits", "track_counts", "track_points", "track_has_query", "track_queries",
-)  # fmt: skip
-
 
 @dataclass(frozen=True)
-class MapperConfig:
-    """Inference settings of the online mapper (validated on construction)."""
+class Variant:
+    """A variant of the learned mapper (paper Table 4): temporal detector memory, learned
+    association, spatial fusion; one line of help; ``learned_only``: it differs from another
+    variant only with the learned detector (on oracle or file detections, without query features
+    and fusion, "no-fusion" is "full" and "single-frame" is "base")."""
 
-    detect_threshold: float = 0.1  # detections reported per frame (evaluated by AP)
-    track_threshold: float = 0.4  # detections associated, fused and merged into the map
-    assoc_threshold: float = 0.5  # θ: minimum association score of a match
-    max_age: int = 3  # frames a lost track stays in the buffer
-    min_hits: int = 2  # frames a new track must be seen before it enters the global map
-    positional_scale: float = 1.0  # metres; affinity exp(-chamfer/scale) without query features
-    reid_distance: float = 1.0  # metres; 0 disables re-identification against the map
-    fusion_margin: float = 20.0  # metres added around the perception range for the history
-    history_points: int = 20
-    smoothing: float = 0.5  # curve-fit s of the merge (scipy splprep semantics)
-    spacing: float = 1.0  # metres between stored map points
-    use_association: bool = True  # False: positional affinity even with query features
-    use_fusion: bool = True  # False: detections are merged as detected
-
-    def __post_init__(self) -> None:
-        for name in ("detect_threshold", "track_threshold", "assoc_threshold"):
-            v = getattr(self, name)
-            if not 0.0 <= v <= 1.0:
-                raise ValueError(f"MapperConfig.{name} must be in [0, 1], got {v}")
-        if self.track_threshold < self.detect_threshold:
-            raise ValueError("MapperConfig.track_threshold must be >= detect_threshold")
-        for name in ("positional_scale", "spacing", "history_points"):
-            if not getattr(self, name) > 0:
-                raise ValueError(f"MapperConfig.{name} must be > 0, got {getattr(self, name)}")
-        if self.min_hits < 1:
-            raise ValueError(f"MapperConfig.min_hits must be >= 1, got {self.min_hits}")
-        for name in ("max_age", "reid_distance", "fusion_margin", "smoothing"):
-            if not getattr(self, name) >= 0:
-                raise ValueError(f"MapperConfig.{name} must be >= 0, got {getattr(self, name)}")
+    temporal: bool
+    use_association: bool
+    use_fusion: bool
+    help: str
+    learned_only: bool = False
 
 
-class NetworkDetector:
-    """The learned detector as a streaming ``DetectionSource`` (memory carried between frames).
+#: The learned mapper's variants. Method names: "icmapper" for "full", "icmapper-<variant>".
+VARIANTS: dict[str, Variant] = {
+    "full": Variant(True, True, True, "IC-Mapper: learned association and spatial fusion"),
+    "no-fusion": Variant(True, True, False, "IC-Mapper without spatial fusion", True),
+    "base": Variant(
+        True, False, False, "the detector, positional tracking, no fusion (StreamMapNet-like)"
+    ),
+    "single-frame": Variant(
+        False, False, False, "like base without temporal memory (MapTR-like)", True
+    ),
+}
 
-    ``temporal=False`` gives the single-frame variant (no BEV memory, no query propagation).
-    """
 
-    def __init__(
-        self, detector: MapDetector, device: str | torch.device = "cpu", temporal: bool = True
-    ):
-        import torch
-
-        self.detector = detector.eval().to(device)
-        self.device = torch.device(device)
-        self.temporal = temporal
-        self.reset()
-
-    def reset(self) -> None:
-        self._state: Any = None
-        self._prev_pose: NDArray[np.float64] | None = None
-
-    def state_dict(self) -> dict[str, NDArray[Any]]:
-        """The streaming memory as numpy arrays (for ``Mapper.save_state``; no tensors, no pickle).
-
-        Keys: ``has_state`` () bool; when true also ``bev`` (1, C, X, Y) float32, ``queries``
-        (1, k, C) float32, ``points`` (1, k, P, 2) float32 in [0, 1], ``src_index`` (1, k) int64
-        (the ``DetectorState``) and ``prev_pose`` (4, 4) float64 ego->world of the last frame.
-        """
-        if self._state is None or self._prev_pose is None:
-            return {"has_state": np.array(False)}
-        st = self._state
-        return {
-            "has_state": np.array(True),
-            "bev": st.bev.detach().cpu().numpy(),  # (1, C, X, Y)
-            "queries": st.queries.detach().cpu().numpy(),  # (1, k, C)
-            "points": st.points.detach().cpu().numpy(),  # (1, k, P, 2)
-            "src_index": st.src_index.detach().cpu().numpy(),  # (1, k)
-            "prev_pose": np.asarray(self._prev_pose, np.float64).copy(),  # (4, 4)
-        }
-
-    def load_state_dict(self, state: dict[str, NDArray[Any]]) -> None:
-        """Restores the memory written by ``state_dict`` (ValueError on missing keys, wrong
-        shapes or dtypes; nothing changes then)."""
-        import torch
-
-        from icmapper.models.detector import DetectorState
-
-        if "has_state" not in state or np.asarray(state["has_state"]).shape != ():
-            raise ValueError("detector state: missing or malformed 'has_state'")
-        if not bool(state["has_state"]):
-            self.reset()
-            return
-        missing = {"bev", "queries", "points", "src_index", "prev_pose"} - set(state)
-        if missing:
-            raise ValueError(f"detector state: missing arrays {sorted(missing)}")
-        spec = self.detector.spec
-        bev, q, pts = state["bev"], state["queries"], state["points"]
-        idx, pose = state["src_index"], state["prev_pose"]
-        k = q.shape[1] if q.ndim == 3 else -1
-        checks = [
-            ("bev", bev, bev.ndim == 4 and bev.shape[:2] == (1, spec.channels), np.float32),
-            ("queries", q, q.shape == (1, k, spec.channels), np.float32),
-            ("points", pts, pts.shape == (1, k, spec.num_points, 2), np.float32),
-            ("src_index", idx, idx.shape == (1, k), np.int64),
-            ("prev_pose", pose, pose.shape == (4, 4), np.float64),
-        ]
-        for name, arr, ok, dtype in checks:
-            if not ok or arr.dtype != dtype:
-                raise ValueError(
-                    f"detector state: {name} has shape {arr.shape} dtype {arr.dtype}, which does "
-                    f"not fit the detector (channels {spec.channels}, points {spec.num_points})"
-                )
-            if arr.dtype.kind == "f" and not np.all(np.isfinite(arr)):
-                raise ValueError(f"detector state: {name} contains NaN or inf")
-        if k > spec.num_queries or (idx.size and (idx.min() < 0 or idx.max() >= spec.num_queries)):
-            raise ValueError("detector state: src_index out of range of the detector's queries")
-        dev = self.device
-        self._state = DetectorState(
-            torch.from_numpy(bev.copy()).to(dev),  # (1, C, X, Y)
-            torch.from_numpy(q.copy()).to(dev),  # (1, k, C)
-            torch.from_numpy(pts.copy()).to(dev),  # (1, k, P, 2)
-            torch.from_numpy(idx.copy()).to(dev),  # (1, k)
-        )
-        self._prev_pose = pose.astype(np.float64, copy=True)
-
-    def detect(self, frame: Frame) -> Detections:
-        import torch
-
-        if frame.images is None:
-            raise ValueError(f"frame {frame.index} has no images: the learned detector needs them")
-        imgs = np.asarray(frame.images)
-        rig = frame.rig
-        if imgs.ndim != 4 or imgs.shape[0] != rig.num_cameras or imgs.shape[1] != 3:
+def network_settings(
+    config: MapperConfig, fusion_margin: float, history_points: int
+) -> MapperConfig:
+    """``config`` with the fusion network's history settings; ValueError when ``config`` sets
+    other values than the defaults and the network's (the network was trained with its own)."""
+    default = MapperConfig()
+    for name, value in (("fusion_margin", fusion_margin), ("history_points", history_points)):
+        mine = getattr(config, name)
+        if mine != value and mine != getattr(default, name):
             raise ValueError(
-                f"frame {frame.index}: images must be ({rig.num_cameras}, 3, H, W), "
-                f"got {imgs.shape}"
+                f"MapperConfig.{name} = {mine}, but the fusion network was trained with {value}"
             )
-        pose = np.asarray(frame.pose, dtype=np.float64)
-        dev = self.device
-        with torch.no_grad():
-            images = torch.as_tensor(imgs, device=dev)[None]  # (1, C, 3, H, W)
-            intr = torch.as_tensor(rig.intrinsics, dtype=torch.float32, device=dev)[None]
-            c2e = torch.as_tensor(rig.cam_to_ego, dtype=torch.float32, device=dev)[None]
-            state, motion = None, None
-            if self.temporal and self._state is not None and self._prev_pose is not None:
-                m = np.linalg.inv(pose) @ self._prev_pose  # (4, 4) previous ego -> current ego
-                motion = torch.as_tensor(m, dtype=torch.float32, device=dev)[None]
-                state = self._state
-            out, new_state = self.detector(images, intr, c2e, state, motion)
-            scores = out.scores()[0]  # (Q,)
-            classes = out.classes()[0]  # (Q,)
-            points = self.detector.to_metres(out.points[-1][0])  # (Q, P, 2) ego metres
-            queries = out.queries[0]  # (Q, C)
-        if self.temporal:
-            self._state, self._prev_pose = new_state, pose
-        order = torch.argsort(scores, descending=True)
-        return Detections(
-            classes=classes[order].cpu().numpy().astype(np.int64),
-            scores=scores[order].cpu().numpy().astype(np.float32),
-            points=points[order].cpu().numpy().astype(np.float32),
-            queries=queries[order].cpu().numpy().astype(np.float32),
-        )
+    return replace(config, fusion_margin=float(fusion_margin), history_points=int(history_points))
 
 
 @dataclass
@@ -290,39 +156,31 @@ class Mapper:
     ) -> Mapper:
         """The mapper with the networks of a training checkpoint.
 
-        variant: "full" (IC-Mapper), "no-fusion" (detector + association), "base" (detector,
-        positional association, no fusion: StreamMapNet-like + post tracking), "single-frame"
-        (like "base" without temporal memory: MapTR-like).
+        variant: one of ``VARIANTS`` — "full" (IC-Mapper), "no-fusion" (detector + association),
+        "base" (detector, positional association, no fusion: StreamMapNet-like + post tracking),
+        "single-frame" (like "base" without temporal memory: MapTR-like). Without a config the
+        detection threshold is the checkpoint's; ``fusion_margin`` and ``history_points`` always
+        come from the fusion network (a config that sets other values raises ValueError).
         """
-        from icmapper.training.checkpoint import load_checkpoint
-        from icmapper.training.config import config_from_dict
-        from icmapper.training.objectives import ICMapperNet
+        from icmapper.models.network import load_network
 
-        blob = load_checkpoint(path, map_location=device)
-        tcfg = config_from_dict(blob["config"])
-        net = ICMapperNet(tcfg)
-        try:
-            net.load_state_dict(blob["model"])
-        except RuntimeError as exc:
-            raise ValueError(f"checkpoint {path} does not fit its config: {exc}") from None
-        variants = {
-            "full": (True, True, True),
-            "no-fusion": (True, True, False),
-            "base": (True, False, False),
-            "single-frame": (False, False, False),
-        }
-        if variant not in variants:
-            raise ValueError(f"unknown variant {variant!r}; expected one of {sorted(variants)}")
-        temporal, use_assoc, use_fusion = variants[variant]
-        cfg = config or MapperConfig(detect_threshold=tcfg.score_threshold)
-        cfg = replace(cfg, use_association=use_assoc, use_fusion=use_fusion)
+        if variant not in VARIANTS:
+            raise ValueError(f"unknown variant {variant!r}; expected one of {sorted(VARIANTS)}")
+        loaded = load_network(path, device)
+        v = VARIANTS[variant]
+        cfg = config or MapperConfig(detect_threshold=loaded.score_threshold)
+        cfg = replace(
+            network_settings(cfg, loaded.model.fusion_margin, loaded.model.fusion_history_points),
+            use_association=v.use_association,
+            use_fusion=v.use_fusion,
+        )
         name = "icmapper" if variant == "full" else f"icmapper-{variant}"
         return cls(
-            NetworkDetector(net.detector, device, temporal=temporal),
-            association=net.association.to(device),
-            fusion=net.fusion.to(device),
+            NetworkDetector(loaded.net.detector, device, temporal=v.temporal),
+            association=loaded.net.association,
+            fusion=loaded.net.fusion,
             config=cfg,
-            rng=tcfg.perception_range,
+            rng=loaded.rng,
             device=device,
             name=name,
         )
@@ -353,6 +211,16 @@ class Mapper:
     def global_map(self) -> GlobalMap:
         return self._map
 
+    @property
+    def alias(self) -> dict[int, int]:
+        """Track id -> the global instance id it maps into (a copy)."""
+        return dict(self._alias)
+
+    @property
+    def untracked_next(self) -> int:
+        """The id the next reported but untracked detection gets."""
+        return self._untracked
+
     def reset(self) -> None:
         """A new sequence: empty map, empty buffer, detector memory cleared."""
         self.source.reset()
@@ -360,192 +228,36 @@ class Mapper:
         self._new_map()
         self.stats = MapperStats()
         self._untracked = UNTRACKED_ID_BASE
-        self._alias: dict[int, int] = {}  # track id -> global instance id it maps into
+        self._alias = {}
+
+    def restore(
+        self,
+        global_map: GlobalMap,
+        *,
+        alias: dict[int, int],
+        untracked: int | None = None,
+        stats: MapperStats | None = None,
+    ) -> None:
+        """Replaces the map, the aliases and (when given) the untracked-id counter and the stats:
+        used by ``mapping.state.resume``, which restores the tracker and the source itself."""
+        self._map = global_map
+        self._alias = dict(alias)
+        if untracked is not None:
+            self._untracked = int(untracked)
+        if stats is not None:
+            self.stats = stats
 
     def save_state(self, path: str | Path) -> None:
-        """Saves everything the next step depends on, so that ``resume(path)`` on a mapper built
-        the same way continues exactly like this one.
+        """Saves everything the next step depends on (``mapping.state.save_state``)."""
+        from icmapper.mapping.state import save_state
 
-        Writes ``path`` (the native global map file) and the sidecar ``<path>.state.npz`` (plain
-        numpy arrays, no pickle, format ``STATE_VERSION``): the tracking buffer (ids, classes,
-        world points, queries, ages, hits), the next track id, the track aliases, the untracked
-        id counter, the stats, the SHA-256 of the map file (ties the pair together) and the
-        detection source's memory when it has one (``state_dict()``, e.g. ``NetworkDetector``).
-        Both files are written atomically.
-        """
-        path = Path(path)
-        sidecar = state_path(path)
-        arrays = self._state_arrays()
-        self._map.save(path)
-        arrays["map_sha256"] = np.array(_sha256(path))
-        fd, tmp = tempfile.mkstemp(prefix=sidecar.name + ".", suffix=".tmp", dir=sidecar.parent)
-        try:
-            with os.fdopen(fd, "wb") as fh:
-                np.savez(fh, **arrays)
-            os.replace(tmp, sidecar)
-        except BaseException:
-            Path(tmp).unlink(missing_ok=True)
-            raise
-
-    def _state_arrays(self) -> dict[str, NDArray[Any]]:
-        """The sidecar's arrays (all but ``map_sha256``); see ``save_state``."""
-        tracks = self.tracker._tracks
-        counts = np.array([len(t.points) for t in tracks], np.int64)  # (t,)
-        pts = [np.asarray(t.points, np.float64).reshape(-1, 2) for t in tracks]
-        has_q = np.array([t.query is not None for t in tracks], bool)  # (t,)
-        dims = {int(np.asarray(t.query).shape[0]) for t in tracks if t.query is not None}
-        if len(dims) > 1:
-            raise ValueError(f"save_state: tracks have queries of different sizes {sorted(dims)}")
-        dim = dims.pop() if dims else 0
-        queries = np.zeros((len(tracks), dim), np.float32)  # (t, D)
-        for i, t in enumerate(tracks):
-            if t.query is not None:
-                queries[i] = t.query
-        st = self.stats
-        arrays: dict[str, NDArray[Any]] = {
-            "version": np.array(STATE_VERSION, np.int64),
-            "source_kind": np.array(type(self.source).__name__),
-            "next_id": np.array(self.tracker._next_id, np.int64),
-            "untracked": np.array(self._untracked, np.int64),
-            "stats_counts": np.array([getattr(st, n) for n in _STAT_COUNTS], np.int64),
-            "stats_seconds": np.array([st.seconds.get(n, 0.0) for n in STAGES], np.float64),
-            "stats_failures": np.array(st.failures, dtype=str).reshape(-1),
-            "alias": np.array(sorted(self._alias.items()), np.int64).reshape(-1, 2),  # (a, 2)
-            "track_ids": np.array([t.id for t in tracks], np.int64),  # (t,)
-            "track_cls": np.array([t.cls for t in tracks], np.int64),
-            "track_age": np.array([t.age for t in tracks], np.int64),
-            "track_hits": np.array([t.hits for t in tracks], np.int64),
-            "track_counts": counts,
-            "track_points": np.concatenate(pts) if pts else np.zeros((0, 2)),  # (sum n, 2)
-            "track_has_query": has_q,
-            "track_queries": queries,
-        }
-        if hasattr(self.source, "state_dict"):
-            for key, val in self.source.state_dict().items():
-                arrays["source." + key] = np.asarray(val)
-        return arrays
+        save_state(self, path)
 
     def resume(self, path: str | Path) -> None:
-        """Continues a saved run.
+        """Continues a saved run (``mapping.state.resume``)."""
+        from icmapper.mapping.state import resume
 
-        With the sidecar ``<path>.state.npz`` of ``save_state``: restores the map, the tracking
-        buffer, the aliases, the counters, the stats and the detector memory, so the continuation
-        is identical to the uninterrupted run (the mapper must be built with the same source,
-        networks and config). Without a sidecar (a map saved with ``global_map.save``): loads the
-        map only, clears the buffer and the detector memory and starts new ids above the map's
-        largest id. A bad map file or sidecar raises ValueError naming the file; nothing changes.
-        """
-        from icmapper._icmap import GlobalMap
-
-        path = Path(path)
-        sidecar = state_path(path)
-        if not sidecar.exists():
-            gmap = GlobalMap.load(str(path))
-            self.source.reset()
-            self.tracker.reset()
-            self._alias = {}
-            self._map = gmap
-            ids = gmap.ids()
-            self.tracker.reserve_ids(int(ids.max()) + 1 if len(ids) else 0)
-            return
-        state = _read_state(sidecar)
-        try:
-            tracks, restore = self._parse_state(state, path)
-        except (ValueError, KeyError, TypeError, IndexError) as exc:
-            raise ValueError(f"mapper state {sidecar}: {exc}") from None
-        gmap = GlobalMap.load(str(path))
-        src_state = {k[7:]: v for k, v in state.items() if k.startswith("source.")}
-        if hasattr(self.source, "load_state_dict"):
-            old = self.source.state_dict() if hasattr(self.source, "state_dict") else None
-            try:
-                self.source.load_state_dict(src_state)
-            except (ValueError, KeyError, TypeError) as exc:
-                if old is not None:
-                    self.source.load_state_dict(old)
-                raise ValueError(f"mapper state {sidecar}: {exc}") from None
-        else:
-            self.source.reset()
-        self._map = gmap
-        self.tracker.reset()
-        self.tracker._tracks = tracks
-        self.tracker._next_id = restore["next_id"]
-        self._alias = restore["alias"]
-        self._untracked = restore["untracked"]
-        self.stats = restore["stats"]
-
-    def _parse_state(
-        self, z: dict[str, NDArray[Any]], map_path: Path
-    ) -> tuple[list[Track], dict[str, Any]]:
-        """Validates the sidecar arrays and builds the tracker buffer and counters from them."""
-        version = int(z["version"])
-        if version != STATE_VERSION:
-            raise ValueError(f"format version {version}, this build reads {STATE_VERSION}")
-        if str(z["map_sha256"]) != _sha256(map_path):
-            raise ValueError(f"it was not saved with the map file {map_path} (checksum differs)")
-        kind = str(z["source_kind"])
-        if kind != type(self.source).__name__:
-            raise ValueError(
-                f"saved with a {kind} source, this mapper has a {type(self.source).__name__}"
-            )
-        has_src = any(k.startswith("source.") for k in z)
-        if has_src != hasattr(self.source, "load_state_dict"):
-            raise ValueError("the detection source state does not fit this mapper's source")
-        ids, cls = _int_array(z, "track_ids"), _int_array(z, "track_cls")
-        age, hits = _int_array(z, "track_age"), _int_array(z, "track_hits")
-        counts = _int_array(z, "track_counts")
-        t = len(ids)
-        has_q = z["track_has_query"]
-        queries, pts = z["track_queries"], z["track_points"]
-        for name, arr in (("track_cls", cls), ("track_age", age), ("track_hits", hits),
-                          ("track_counts", counts), ("track_has_query", has_q)):  # fmt: skip
-            if arr.shape != (t,):
-                raise ValueError(f"{name} has shape {arr.shape}, expected ({t},)")
-        if has_q.dtype != bool or queries.ndim != 2 or queries.shape[0] != t:
-            raise ValueError(f"track_queries {queries.shape} / has_query do not fit {t} tracks")
-        if queries.dtype != np.float32 or not np.all(np.isfinite(queries)):
-            raise ValueError("track_queries must be finite float32")
-        if pts.dtype != np.float64 or pts.ndim != 2 or pts.shape[1] != 2:
-            raise ValueError(f"track_points must be (n, 2) float64, got {pts.shape} {pts.dtype}")
-        if not np.all(np.isfinite(pts)):
-            raise ValueError("track_points contain NaN or inf")
-        if np.any(counts < 1) or int(counts.sum()) != len(pts):
-            raise ValueError(f"track_counts (sum {int(counts.sum())}) do not fit {len(pts)} points")
-        if len(set(ids.tolist())) != t or np.any(age < 0) or np.any(hits < 1):
-            raise ValueError("duplicate track ids, negative ages or hits < 1")
-        offsets = np.concatenate([[0], np.cumsum(counts)])
-        tracks = [
-            Track(
-                int(ids[i]),
-                int(cls[i]),
-                pts[offsets[i] : offsets[i + 1]].copy(),  # (n, 2) world
-                queries[i].copy() if has_q[i] else None,  # (D,)
-                int(age[i]),
-                int(hits[i]),
-            )
-            for i in range(t)
-        ]
-        alias = _int_array(z, "alias", ndim=2)
-        if alias.shape[1:] != (2,):
-            raise ValueError(f"alias must be (a, 2), got {alias.shape}")
-        counts_s = _int_array(z, "stats_counts")
-        seconds = z["stats_seconds"]
-        if counts_s.shape != (len(_STAT_COUNTS),) or seconds.shape != (len(STAGES),):
-            raise ValueError(f"stats arrays have shapes {counts_s.shape}, {seconds.shape}")
-        failures = z["stats_failures"]
-        if failures.ndim != 1 or failures.dtype.kind != "U":
-            raise ValueError("stats_failures must be a 1-d string array")
-        stats = MapperStats(
-            seconds={n: float(v) for n, v in zip(STAGES, seconds, strict=True)},
-            failures=[str(f) for f in failures],
-            **{n: int(v) for n, v in zip(_STAT_COUNTS, counts_s, strict=True)},
-        )
-        restore = {
-            "next_id": int(_int_array(z, "next_id", ndim=0)),
-            "untracked": int(_int_array(z, "untracked", ndim=0)),
-            "alias": {int(a): int(b) for a, b in alias},
-            "stats": stats,
-        }
-        return tracks, restore
+        resume(self, path)
 
     def finish(self) -> GlobalMap:
         return self._map
@@ -645,40 +357,29 @@ class Mapper:
         hist_cls: NDArray[np.int64],
         hist_pts: NDArray[np.float32],
     ) -> NDArray[np.int64]:
-        """New tracks lying on a same-class global instance take its id (see module docstring).
-        hist_row: global id -> row of the sampled history (hist_cls (k,), hist_pts (k, S, 2))."""
-        limit = self.config.reid_distance
-        if limit <= 0 or not hist_row:
-            return track_ids
+        """New tracks lying on a same-class global instance take its id (``mapping.reid``)."""
+        is_new = np.array(
+            [t not in self._map and t not in self._alias for t in track_ids.tolist()], bool
+        )  # (k,)
+        decision = reidentify(
+            det.classes,
+            det.points,
+            track_ids,
+            is_new,
+            hist_row,
+            hist_cls,
+            hist_pts,
+            self.config.reid_distance,
+        )
         ids = track_ids.copy()
-        taken = {int(i) for i in ids if int(i) in hist_row}
-        for j, tid in enumerate(ids.tolist()):
-            if tid in self._map or tid in hist_row or tid in self._alias:
-                continue  # an existing instance: nothing to re-identify
-            cls = int(det.classes[j])
-            cands = [(gid, row) for gid, row in hist_row.items() if int(hist_cls[row]) == cls]
-            if not cands:
-                continue
-            hist = hist_pts[[r for _, r in cands]].astype(np.float64)  # (c, S, 2)
-            segs = _segments(hist, np.full(len(cands), cls == 0))  # (c, S, 2, 2)
-            dist = _point_to_segments(det.points[j].astype(np.float64), segs)  # (c, P)
-            # share of the detection lying on the instance: a piece that slid along the
-            # instance or grew at the range edge still overlaps it over most of its length
-            overlap = (dist <= limit).mean(axis=1)  # (c,)
-            best = int(np.argmax(overlap - 1e-3 * dist.mean(axis=1)))
-            d = np.where(overlap >= REID_MIN_OVERLAP, 0.0, np.inf)  # (c,)
-            if d[best] <= limit:
-                gid = cands[best][0]
-                if gid in taken:
-                    # another piece of the same instance (clipped into several pieces): the
-                    # track keeps its id and maps into the instance
-                    self._alias[tid] = gid
-                    self.stats.aliased += 1
-                else:
-                    self.tracker.rename(tid, gid)
-                    ids[j] = gid
-                    taken.add(gid)
-                    self.stats.reidentified += 1
+        for j, tid in enumerate(track_ids.tolist()):
+            if tid in decision.aliased:
+                self._alias[tid] = decision.aliased[tid]
+                self.stats.aliased += 1
+            elif tid in decision.renamed:
+                self.tracker.rename(tid, decision.renamed[tid])
+                ids[j] = decision.renamed[tid]
+                self.stats.reidentified += 1
         return ids
 
     def _fuse(
@@ -758,16 +459,6 @@ class Mapper:
         return inserted, merged
 
 
-def _point_to_segments(p: NDArray[np.float64], seg: NDArray[np.float64]) -> NDArray[np.float64]:
-    """p (n, 2), seg (c, S, 2, 2) -> (c, n): distance of every point to the nearest segment."""
-    a, b = seg[:, None, :, 0], seg[:, None, :, 1]  # (c, 1, S, 2)
-    ab = b - a  # (c, 1, S, 2)
-    ap = p[None, :, None, :] - a  # (c, n, S, 2)
-    t = np.clip((ap * ab).sum(-1) / np.maximum((ab * ab).sum(-1), 1e-18), 0.0, 1.0)  # (c, n, S)
-    off = ap - t[..., None] * ab  # (c, n, S, 2)
-    return np.sqrt((off * off).sum(-1)).min(axis=2)  # (c, n)
-
-
 def _select(d: Detections, keep: NDArray[np.bool_]) -> Detections:
     return Detections(
         classes=d.classes[keep],
@@ -776,33 +467,3 @@ def _select(d: Detections, keep: NDArray[np.bool_]) -> Detections:
         queries=None if d.queries is None else d.queries[keep],
         gt_ids=None if d.gt_ids is None else d.gt_ids[keep],
     )
-
-
-def state_path(map_path: str | Path) -> Path:
-    """The sidecar of a saved map: ``<map_path>.state.npz`` (see ``Mapper.save_state``)."""
-    p = Path(map_path)
-    return p.with_name(p.name + ".state.npz")
-
-
-def _sha256(path: Path) -> str:
-    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
-
-
-def _read_state(sidecar: Path) -> dict[str, NDArray[Any]]:
-    """All arrays of a sidecar (ValueError naming the file if it is not a readable npz)."""
-    try:
-        with np.load(sidecar, allow_pickle=False) as z:
-            out = {k: z[k] for k in z.files}
-    except (OSError, ValueError, EOFError, zipfile.BadZipFile, zlib.error, KeyError) as exc:
-        raise ValueError(f"mapper state {sidecar} is not a valid state file: {exc}") from None
-    missing = set(_STATE_KEYS) - set(out)
-    if missing:
-        raise ValueError(f"mapper state {sidecar}: missing arrays {sorted(missing)}")
-    return out
-
-
-def _int_array(z: dict[str, NDArray[Any]], key: str, ndim: int = 1) -> NDArray[np.int64]:
-    arr = z[key]
-    if arr.dtype != np.int64 or arr.ndim != ndim:
-        raise ValueError(f"{key} must be a {ndim}-d int64 array, got {arr.shape} {arr.dtype}")
-    return arr

@@ -10,7 +10,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -18,23 +18,8 @@ from numpy.typing import NDArray
 from icmapper.data.types import Frame, PerceptionRange, Sequence
 from icmapper.mapping.types import Detections, DetectionSource, MappingMethod
 
-#: Methods of `icmapper map --method` / `compare`, in table order.
-METHODS = (
-    "icmapper",
-    "icmapper-no-fusion",
-    "icmapper-base",
-    "icmapper-single-frame",
-    "post-track",
-    "vma",
-    "cluster-fit",
-    "polymerge",
-)
-_BASELINE_NAMES = {
-    "post-track": "post_track",
-    "vma": "vma_merge",
-    "cluster-fit": "cluster_fit",
-    "polymerge": "polymerge",
-}
+if TYPE_CHECKING:
+    from icmapper.mapping.config import MapperConfig
 
 
 class RecordingSource:
@@ -74,7 +59,7 @@ class ReplaySource:
 
 
 @dataclass
-class DetectorSpec:
+class DetectionInput:
     """Where detections come from: the learned detector of a checkpoint or the noisy-GT oracle."""
 
     checkpoint: str | None = None
@@ -85,17 +70,17 @@ class DetectorSpec:
     @staticmethod
     def parse(
         detections: str, checkpoint: str | None, device: str = "cpu", seed: int = 0
-    ) -> DetectorSpec:
+    ) -> DetectionInput:
         """detections: "learned" or "oracle[:PRESET]"."""
         if detections == "learned":
             if not checkpoint:
                 raise ValueError("--detections learned needs --checkpoint PATH")
             if not Path(checkpoint).is_file():
                 raise OSError(f"checkpoint {checkpoint} does not exist")
-            return DetectorSpec(checkpoint=checkpoint, device=device, seed=seed)
+            return DetectionInput(checkpoint=checkpoint, device=device, seed=seed)
         if detections == "oracle" or detections.startswith("oracle:"):
             preset = detections.split(":", 1)[1] if ":" in detections else "low"
-            return DetectorSpec(oracle_noise=preset, device=device, seed=seed)
+            return DetectionInput(oracle_noise=preset, device=device, seed=seed)
         raise ValueError(
             f"bad --detections {detections!r}; expected 'learned' or 'oracle[:PRESET]'"
         )
@@ -105,40 +90,54 @@ class DetectorSpec:
         return self.checkpoint is not None
 
 
-def method_factory(
-    method: str, spec: DetectorSpec, rng: PerceptionRange
-) -> Callable[
+#: (sequence, recorded detections or None) -> (method, its recorder or None)
+MethodFactory = Callable[
     [Sequence, dict[int, Detections] | None], tuple[MappingMethod, RecordingSource | None]
-]:
-    """A function (sequence, recorded detections or None) -> (method, recorder or None)."""
-    if method not in METHODS:
-        raise ValueError(f"unknown method {method!r}; expected one of {', '.join(METHODS)}")
-    from icmapper.mapping.mapper import Mapper, MapperConfig
+]
+
+
+def method_factory(
+    name: str, inp: DetectionInput, rng: PerceptionRange, config: MapperConfig | None = None
+) -> MethodFactory:
+    """A function (sequence, recorded detections or None) -> (method, recorder or None) for the
+    registered method ``name`` (``mapping.methods``), every method under the same ``config``
+    (None: the defaults, and the checkpoint's detection threshold for the learned mapper).
+
+    With the learned detector, the checkpoint is loaded once per factory; the first method that
+    runs the detector on a sequence records its detections, and the methods that need no query
+    features replay them (``RecordingSource`` / ``ReplaySource``)."""
+    from icmapper.mapping.config import MapperConfig
+    from icmapper.mapping.mapper import Mapper
+    from icmapper.mapping.methods import method
+
+    info = method(name)
+    cfg = config or MapperConfig()
 
     def oracle(seq: Sequence) -> DetectionSource:
         from icmapper.mapping.oracle import OracleDetector
 
-        return OracleDetector(seq, rng=rng, noise=spec.oracle_noise or "low", seed=spec.seed)
+        return OracleDetector(seq, rng=rng, noise=inp.oracle_noise or "low", seed=inp.seed)
 
-    if method.startswith("icmapper"):
-        variant = method[len("icmapper-") :] if method != "icmapper" else "full"
-        if spec.checkpoint is None and variant not in ("full", "base"):
-            raise ValueError(f"method {method} needs the learned detector (--detections learned)")
+    if inp.checkpoint is None and info.learned_only:
+        raise ValueError(f"method {name} needs the learned detector (--detections learned)")
 
+    if info.variant is not None:
+        variant = info.variant
         built: list = []  # [Mapper, its NetworkDetector] once loaded
 
         def make_mapper(seq: Sequence, records: dict[int, Detections] | None):
-            if spec.checkpoint is None:
-                m = Mapper(oracle(seq), config=MapperConfig(), rng=rng, name=method)
-                return m, None
+            if inp.checkpoint is None:
+                return Mapper(oracle(seq), config=cfg, rng=rng, name=name), None
             if not built:  # load the checkpoint once; the Mapper is reset for every sequence
                 built.append(
-                    Mapper.from_checkpoint(spec.checkpoint, device=spec.device, variant=variant)
+                    Mapper.from_checkpoint(
+                        inp.checkpoint, config=config, device=inp.device, variant=variant
+                    )
                 )
                 built.append(built[0].source)
             m, net_source = built
             m.source = net_source
-            if variant in ("full", "no-fusion") and records is None:
+            if m.config.use_association and records is None:
                 rec = RecordingSource(net_source)
                 m.source = rec
                 return m, rec
@@ -146,20 +145,21 @@ def method_factory(
 
         return make_mapper
 
-    from icmapper.mapping import baselines
-
-    cls = baselines.BASELINES[_BASELINE_NAMES[method]]
+    build = info.build
+    assert build is not None
     net: list = []  # the learned detection source, once loaded
 
     def make_baseline(seq: Sequence, records: dict[int, Detections] | None):
-        if spec.checkpoint is None:
-            return cls(oracle(seq)), None
+        if inp.checkpoint is None:
+            return build(oracle(seq), cfg, rng), None
         if records is not None:
-            return cls(ReplaySource(records)), None
+            return build(ReplaySource(records), cfg, rng), None
         if not net:  # load the checkpoint once
-            net.append(Mapper.from_checkpoint(spec.checkpoint, device=spec.device).source)
+            net.append(
+                Mapper.from_checkpoint(inp.checkpoint, config=config, device=inp.device).source
+            )
         rec = RecordingSource(net[0])
-        return cls(rec), rec
+        return build(rec, cfg, rng), rec
 
     return make_baseline
 

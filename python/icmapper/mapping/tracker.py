@@ -339,6 +339,24 @@ class Tracker:
         """Makes every future new id >= `below` (continuing an existing map whose ids are used)."""
         self._next_id = max(self._next_id, int(below))
 
+    def restore(self, tracks: list[Track], next_id: int) -> None:
+        """Replaces the buffer and the id counter, e.g. with a saved run's (``mapping.state``).
+        ValueError, with nothing changed, for duplicate ids, a negative counter, bad geometry,
+        negative ages or hits < 1."""
+        ids = [int(t.id) for t in tracks]
+        if len(set(ids)) != len(ids):
+            raise ValueError("Tracker.restore: duplicate track ids")
+        if next_id < 0:
+            raise ValueError(f"Tracker.restore: next id must be >= 0, got {next_id}")
+        for t in tracks:
+            pts = np.asarray(t.points)
+            if pts.ndim != 2 or pts.shape[1] != 2 or not np.all(np.isfinite(pts)):
+                raise ValueError(f"Tracker.restore: track {t.id} needs finite (n, 2) points")
+            if t.age < 0 or t.hits < 1:
+                raise ValueError(f"Tracker.restore: track {t.id} has age {t.age}, hits {t.hits}")
+        self._tracks = list(tracks)
+        self._next_id = int(next_id)
+
     def rename(self, track_id: int, new_id: int) -> None:
         """Gives track `track_id` the id `new_id` (re-identification against the global map); any
         other buffer entry holding `new_id` is dropped."""

@@ -22,8 +22,10 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import ConvexHull, QhullError, cKDTree
 
-from icmapper.data.types import NUM_CLASSES, Frame, MapClass
-from icmapper.mapping.baselines.common import check_threshold, new_global_map, read_frame
+from icmapper.data.types import NUM_CLASSES, Frame, MapClass, PerceptionRange, RANGE_60x30
+from icmapper.mapping.baselines.common import new_global_map, read_frame
+from icmapper.mapping.config import MapperConfig
+from icmapper.mapping.methods import MethodInfo, register_method
 from icmapper.mapping.types import DetectionSource, StepResult
 
 if TYPE_CHECKING:
@@ -102,29 +104,22 @@ class ClusterFit:
     and the map's point spacing.
     """
 
-    name = "cluster_fit"
+    name = "cluster-fit"
 
     def __init__(
         self,
         source: DetectionSource,
-        score_threshold: float = 0.3,
-        eps: float = 3.0,
-        min_samples: int = 5,
-        smoothing: float = 0.5,
-        spacing: float = 1.0,
+        config: MapperConfig | None = None,
+        rng: PerceptionRange = RANGE_60x30,
     ) -> None:
-        if not eps > 0 or min_samples < 1:
-            raise ValueError(
-                f"ClusterFit: need eps > 0 and min_samples >= 1, got {eps}, {min_samples}"
-            )
-        if not spacing > 0:
-            raise ValueError(f"ClusterFit: spacing must be > 0, got {spacing}")
+        cfg = config or MapperConfig()
         self.source = source
-        self.score_threshold = check_threshold(score_threshold)
-        self.eps = float(eps)
-        self.min_samples = int(min_samples)
-        self.smoothing = float(smoothing)
-        self.spacing = float(spacing)
+        self.config = cfg
+        self.score_threshold = cfg.baseline_threshold
+        self.eps = cfg.cluster_eps
+        self.min_samples = cfg.cluster_min_samples
+        self.smoothing = cfg.smoothing
+        self.spacing = cfg.spacing
         self._points: list[list[NDArray[np.float64]]] = [[] for _ in range(NUM_CLASSES)]
         self._last_frame = 0
 
@@ -148,7 +143,7 @@ class ClusterFit:
         """Clusters everything collected and returns a new global map."""
         from icmapper.geom import fit_curve
 
-        gmap = new_global_map(self.smoothing, self.spacing)
+        gmap = new_global_map(self.config)
         for cls in range(NUM_CLASSES):
             if not self._points[cls]:
                 continue
@@ -170,3 +165,12 @@ class ClusterFit:
                     line = fit_curve(line, s=self.smoothing, spacing=self.spacing)
                 gmap.insert(cls, line, self._last_frame)
         return gmap
+
+
+register_method(
+    MethodInfo(
+        ClusterFit.name,
+        "Cluster & Fit: DBSCAN of all detected points, spline fit / convex hull",
+        build=ClusterFit,
+    )
+)

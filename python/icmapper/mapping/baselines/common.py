@@ -18,14 +18,15 @@ from icmapper.mapping.types import Detections, DetectionSource
 
 if TYPE_CHECKING:
     from icmapper._icmap import GlobalMap
+    from icmapper.mapping.config import MapperConfig
 
 
-def new_global_map(smoothing: float, spacing: float) -> GlobalMap:
-    """An empty engine map (icmapper.GlobalMap); imported here so that importing a baseline does
-    not need the native extension."""
+def new_global_map(config: MapperConfig) -> GlobalMap:
+    """An empty engine map (icmapper.GlobalMap) with the config's smoothing and spacing; imported
+    here so that importing a baseline does not need the native extension."""
     from icmapper._icmap import GlobalMap
 
-    return GlobalMap(smoothing=smoothing, spacing=spacing)
+    return GlobalMap(smoothing=config.smoothing, spacing=config.spacing)
 
 
 @dataclass
@@ -55,9 +56,3 @@ def read_frame(source: DetectionSource, frame: Frame, score_threshold: float) ->
     k, n = dets.points.shape[:2]
     world = ego_to_world(dets.points.reshape(-1, 2), pose).reshape(k, n, 2)  # (k, n, 2)
     return FrameInput(dets, world, xyyaw)
-
-
-def check_threshold(score_threshold: float) -> float:
-    if not 0.0 <= score_threshold <= 1.0:
-        raise ValueError(f"score_threshold must be in [0, 1], got {score_threshold}")
-    return float(score_threshold)

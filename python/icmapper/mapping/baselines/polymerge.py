@@ -21,8 +21,10 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from icmapper.data.types import Frame, MapClass, PerceptionRange, RANGE_60x30
-from icmapper.mapping.baselines.common import check_threshold, new_global_map, read_frame
+from icmapper.mapping.baselines.common import new_global_map, read_frame
 from icmapper.mapping.baselines.splice import overlap_fraction, splice_polyline
+from icmapper.mapping.config import MapperConfig
+from icmapper.mapping.methods import MethodInfo, register_method
 from icmapper.mapping.types import DetectionSource, StepResult
 
 if TYPE_CHECKING:
@@ -42,29 +44,21 @@ class PolyMerge:
     def __init__(
         self,
         source: DetectionSource,
-        score_threshold: float = 0.3,
-        buffer: float = 1.0,
-        min_overlap: float = 0.3,
+        config: MapperConfig | None = None,
         rng: PerceptionRange = RANGE_60x30,
-        smoothing: float = 0.5,
-        spacing: float = 1.0,
     ) -> None:
-        if not buffer > 0:
-            raise ValueError(f"PolyMerge: buffer must be > 0 metres, got {buffer}")
-        if not 0.0 < min_overlap <= 1.0:
-            raise ValueError(f"PolyMerge: min_overlap must be in (0, 1], got {min_overlap}")
+        cfg = config or MapperConfig()
         self.source = source
-        self.score_threshold = check_threshold(score_threshold)
-        self.buffer = float(buffer)
-        self.min_overlap = float(min_overlap)
+        self.config = cfg
+        self.score_threshold = cfg.baseline_threshold
+        self.buffer = cfg.polymerge_buffer
+        self.min_overlap = cfg.polymerge_min_overlap
         self.range = rng
-        self.smoothing = float(smoothing)
-        self.spacing = float(spacing)
-        self.map: GlobalMap = new_global_map(self.smoothing, self.spacing)
+        self.map: GlobalMap = new_global_map(cfg)
 
     def reset(self) -> None:
         self.source.reset()
-        self.map = new_global_map(self.smoothing, self.spacing)
+        self.map = new_global_map(self.config)
 
     def step(self, frame: Frame) -> StepResult:
         """Merges every detection of the frame into an overlapping instance or inserts it."""
@@ -102,3 +96,12 @@ class PolyMerge:
 
     def finish(self) -> GlobalMap:
         return self.map
+
+
+register_method(
+    MethodInfo(
+        PolyMerge.name,
+        "PolyMerge-style rule-based merging by overlap, without ids",
+        build=PolyMerge,
+    )
+)

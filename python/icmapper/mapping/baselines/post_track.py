@@ -17,9 +17,11 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numpy.typing import NDArray
 
-from icmapper.data.types import Frame
-from icmapper.mapping.baselines.common import check_threshold, new_global_map, read_frame
-from icmapper.mapping.tracker import DEFAULT_AFFINITY_SCALE, Tracker, positional_affinity
+from icmapper.data.types import Frame, PerceptionRange, RANGE_60x30
+from icmapper.mapping.baselines.common import new_global_map, read_frame
+from icmapper.mapping.config import MapperConfig
+from icmapper.mapping.methods import MethodInfo, register_method
+from icmapper.mapping.tracker import Tracker, positional_affinity
 from icmapper.mapping.types import DetectionSource, StepResult
 
 if TYPE_CHECKING:
@@ -29,46 +31,42 @@ if TYPE_CHECKING:
 class PostTrack:
     """Post-Track ids + engine merge (see the module docstring).
 
-    source: where detections come from; score_threshold: detections below are ignored; gate:
-    largest Chamfer distance (m) of a link between a detection and a track (seen from the current
-    ego frame); max_age: frames a track survives unseen; scale: length scale of the positional
-    affinity; smoothing / spacing: the global map's curve-fit smoothing and point spacing.
+    source: where detections come from. Settings (``MapperConfig``): ``baseline_threshold``
+    (detections below are ignored), ``gate`` (largest Chamfer distance in metres of a link between
+    a detection and a track, seen from the current ego frame), ``max_age`` (frames a track survives
+    unseen), ``positional_scale`` (length scale of the positional affinity), ``smoothing`` /
+    ``spacing`` (the global map's curve-fit smoothing and point spacing).
     """
 
-    name = "post_track"
+    name = "post-track"
 
     def __init__(
         self,
         source: DetectionSource,
-        score_threshold: float = 0.3,
-        gate: float = 1.5,
-        max_age: int = 3,
-        scale: float = DEFAULT_AFFINITY_SCALE,
-        smoothing: float = 0.5,
-        spacing: float = 1.0,
+        config: MapperConfig | None = None,
+        rng: PerceptionRange = RANGE_60x30,
     ) -> None:
-        if not gate > 0:
-            raise ValueError(f"{type(self).__name__}: gate must be > 0 metres, got {gate}")
+        cfg = config or MapperConfig()
         self.source = source
-        self.score_threshold = check_threshold(score_threshold)
-        self.gate = float(gate)
-        self.scale = float(scale)
-        self.smoothing = float(smoothing)
-        self.spacing = float(spacing)
-        self.tracker = Tracker(threshold=float(np.exp(-gate / scale)), max_age=max_age)
-        self.map: GlobalMap = new_global_map(self.smoothing, self.spacing)
+        self.config = cfg
+        self.score_threshold = cfg.baseline_threshold
+        self.tracker = Tracker(
+            threshold=float(np.exp(-cfg.gate / cfg.positional_scale)), max_age=cfg.max_age
+        )
+        self.map: GlobalMap = new_global_map(cfg)
 
     def reset(self) -> None:
         self.source.reset()
         self.tracker.reset()
-        self.map = new_global_map(self.smoothing, self.spacing)
+        self.map = new_global_map(self.config)
 
     def step(self, frame: Frame) -> StepResult:
         """Detects, links detections to tracks, inserts / merges each into the global map."""
         inp = read_frame(self.source, frame, self.score_threshold)
         dets = inp.dets
         _, trk_cls, trk_pts, _ = self.tracker.tracks_in_ego(frame.pose)  # (t,), (t, 20, 2)
-        aff = positional_affinity(dets.points, dets.classes, trk_pts, trk_cls, self.scale)  # (k, t)
+        scale = self.config.positional_scale
+        aff = positional_affinity(dets.points, dets.classes, trk_pts, trk_cls, scale)  # (k, t)
         ids = self.tracker.assign(aff, dets.classes, dets.points, frame.pose)  # (k,)
         inserted: list[int] = []
         merged: list[int] = []
@@ -89,3 +87,12 @@ class PostTrack:
 
     def finish(self) -> GlobalMap:
         return self.map
+
+
+register_method(
+    MethodInfo(
+        PostTrack.name,
+        "Post-Track: positional tracking after detection, engine merge",
+        build=PostTrack,
+    )
+)

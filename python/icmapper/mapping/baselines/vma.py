@@ -20,8 +20,7 @@ from scipy.spatial import ConvexHull, QhullError
 from icmapper.data.types import MapClass
 from icmapper.mapping.baselines.post_track import PostTrack
 from icmapper.mapping.baselines.splice import inside_ring, ring_distance, splice_polyline
-from icmapper.mapping.tracker import DEFAULT_AFFINITY_SCALE
-from icmapper.mapping.types import DetectionSource
+from icmapper.mapping.methods import MethodInfo, register_method
 
 if TYPE_CHECKING:
     pass
@@ -30,27 +29,11 @@ if TYPE_CHECKING:
 class VmaMerge(PostTrack):
     """Post-Track ids + substitution / concatenation merging.
 
-    overlap: distance (m) within which a stored point counts as seen again by the new observation;
-    other arguments as in PostTrack.
+    Settings as PostTrack's, plus ``vma_overlap``: distance (m) within which a stored point counts
+    as seen again by the new observation.
     """
 
-    name = "vma_merge"
-
-    def __init__(
-        self,
-        source: DetectionSource,
-        score_threshold: float = 0.3,
-        gate: float = 1.5,
-        max_age: int = 3,
-        overlap: float = 1.0,
-        scale: float = DEFAULT_AFFINITY_SCALE,
-        smoothing: float = 0.5,
-        spacing: float = 1.0,
-    ) -> None:
-        if not overlap > 0:
-            raise ValueError(f"VmaMerge: overlap must be > 0 metres, got {overlap}")
-        super().__init__(source, score_threshold, gate, max_age, scale, smoothing, spacing)
-        self.overlap = float(overlap)
+    name = "vma"
 
     def _update(self, tid: int, cls: int, world: NDArray[np.float64], frame: int) -> bool:
         if tid not in self.map:
@@ -58,9 +41,9 @@ class VmaMerge(PostTrack):
             return False
         _, stored = self.map.get(tid)
         if MapClass(cls).closed:
-            new = splice_ring(np.asarray(stored, np.float64), world, self.overlap)
+            new = splice_ring(np.asarray(stored, np.float64), world, self.config.vma_overlap)
         else:
-            new = splice_polyline(np.asarray(stored, np.float64), world, self.overlap)
+            new = splice_polyline(np.asarray(stored, np.float64), world, self.config.vma_overlap)
         self.map.replace(tid, new, frame)
         return True
 
@@ -78,3 +61,10 @@ def splice_ring(
         return pts[ConvexHull(pts).vertices]
     except QhullError:
         return new  # degenerate (collinear) points: keep the new observation as it is
+
+
+register_method(
+    MethodInfo(
+        VmaMerge.name, "Post-track & VMA-merge: substitution and concatenation", build=VmaMerge
+    )
+)

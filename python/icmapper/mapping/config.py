@@ -1,0 +1,109 @@
+"""``MapperConfig``: every inference setting of every mapping method, with its default, in one
+place.
+
+IC-Mapper and each baseline read their settings from the same ``MapperConfig``, so a comparison
+runs every method under the settings the user chose (e.g. one curve-fit smoothing for all). The
+fields' ``help`` metadata feeds the command line (``icmapper map --set NAME=VALUE``, and one
+``--NAME`` flag for each of ``CLI_FLAGS``); a run folder records the config it ran with
+(``mapper_config.json``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, fields
+from typing import Any
+
+from icmapper.settings import from_table, to_plain
+
+
+def _f(default: Any, help: str) -> Any:  # noqa: A002 - argparse's word
+    return field(default=default, metadata={"help": help})
+
+
+@dataclass(frozen=True)
+class MapperConfig:
+    """Inference settings of the mapping methods (validated on construction: ValueError naming
+    the field). Groups: shared by every method; IC-Mapper's; the baselines'."""
+
+    # ---- every method: the global map and the tracking buffer
+    smoothing: float = _f(0.5, "curve-fit smoothing s of the merge (scipy splprep semantics)")
+    spacing: float = _f(1.0, "metres between stored map points")
+    max_age: int = _f(3, "frames a lost track stays in the tracking buffer")
+    positional_scale: float = _f(
+        1.0, "metres; positional affinity exp(-chamfer/scale) (no query features, Post-Track)"
+    )
+    # ---- IC-Mapper
+    detect_threshold: float = _f(0.1, "score of detections reported per frame (evaluated by AP)")
+    track_threshold: float = _f(0.4, "score of detections tracked, fused and merged into the map")
+    assoc_threshold: float = _f(0.5, "θ: minimum association score of a match")
+    min_hits: int = _f(2, "frames a new track must be seen before it enters the global map")
+    reid_distance: float = _f(1.0, "metres; re-identification against the map (0: off)")
+    fusion_margin: float = _f(
+        20.0, "metres around the range for the sampled history (the fusion network's own value)"
+    )
+    history_points: int = _f(20, "points per sampled history instance (the network's own value)")
+    use_association: bool = _f(True, "learned association (false: positional affinity)")
+    use_fusion: bool = _f(True, "spatial fusion with the map's history (false: merge as detected)")
+    # ---- baselines
+    baseline_threshold: float = _f(0.3, "score of detections the baselines use and report")
+    gate: float = _f(1.5, "Post-Track / VMA: largest Chamfer distance (m) of a link")
+    vma_overlap: float = _f(1.0, "VMA: metres within which a detection overlaps its instance")
+    cluster_eps: float = _f(3.0, "Cluster & Fit: DBSCAN eps (m)")
+    cluster_min_samples: int = _f(5, "Cluster & Fit: DBSCAN min_samples")
+    polymerge_buffer: float = _f(1.0, "PolyMerge: overlap buffer (m)")
+    polymerge_min_overlap: float = _f(0.3, "PolyMerge: share of a detection that must overlap")
+
+    def __post_init__(self) -> None:
+        for name in ("detect_threshold", "track_threshold", "assoc_threshold",
+                     "baseline_threshold"):  # fmt: skip
+            v = getattr(self, name)
+            if not 0.0 <= v <= 1.0:
+                raise ValueError(f"MapperConfig.{name} must be in [0, 1], got {v}")
+        if self.track_threshold < self.detect_threshold:
+            raise ValueError("MapperConfig.track_threshold must be >= detect_threshold")
+        for name in ("positional_scale", "spacing", "smoothing", "history_points", "gate",
+                     "vma_overlap", "cluster_eps", "polymerge_buffer"):  # fmt: skip
+            if not getattr(self, name) > 0:
+                raise ValueError(f"MapperConfig.{name} must be > 0, got {getattr(self, name)}")
+        for name in ("min_hits", "cluster_min_samples"):
+            if getattr(self, name) < 1:
+                raise ValueError(f"MapperConfig.{name} must be >= 1, got {getattr(self, name)}")
+        for name in ("max_age", "reid_distance", "fusion_margin"):
+            if not getattr(self, name) >= 0:
+                raise ValueError(f"MapperConfig.{name} must be >= 0, got {getattr(self, name)}")
+        if not 0.0 < self.polymerge_min_overlap <= 1.0:
+            raise ValueError(
+                f"MapperConfig.polymerge_min_overlap must be in (0, 1], "
+                f"got {self.polymerge_min_overlap}"
+            )
+
+    # ---- plain data
+    @staticmethod
+    def from_dict(table: dict[str, Any], base: MapperConfig | None = None) -> MapperConfig:
+        """A config from plain values (unknown names and wrong types raise ValueError);
+        fields not given keep ``base``'s values (or the defaults)."""
+        return from_table(MapperConfig, table, "mapper", base)
+
+    def to_dict(self) -> dict[str, Any]:
+        return to_plain(self)
+
+    @staticmethod
+    def help() -> dict[str, str]:
+        """Field name -> one-line help with its default (for the command line)."""
+        return {
+            f.name: f"{f.metadata.get('help', '')} (default {f.default})"
+            for f in fields(MapperConfig)
+        }
+
+
+#: Settings a user tunes most, given their own flag on `icmapper map` / `compare` (the rest
+#: through --set NAME=VALUE).
+CLI_FLAGS = (
+    "assoc_threshold",
+    "track_threshold",
+    "detect_threshold",
+    "min_hits",
+    "smoothing",
+    "spacing",
+    "baseline_threshold",
+)

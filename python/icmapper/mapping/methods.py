@@ -1,0 +1,81 @@
+"""The registry of mapping methods: one ``MethodInfo`` per name of `icmapper map --method` and
+`icmapper compare --methods`, in table order.
+
+Two kinds of method:
+- a **variant of the learned mapper** (``variant`` set: a key of ``mapper.VARIANTS``), built from a
+  checkpoint's networks with ``Mapper.from_checkpoint``;
+- a **method on any detection source** (``build`` set): ``build(source, config, rng)`` returns a
+  ``MappingMethod`` reading its settings from the shared ``MapperConfig``. Every baseline is one.
+
+A new baseline is one module (the class, with ``name`` set to its registered name) plus one
+``register_method`` call at its end; the command line's choices and help come from here.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+from icmapper.data.types import PerceptionRange
+
+if TYPE_CHECKING:
+    from icmapper.mapping.config import MapperConfig
+    from icmapper.mapping.types import DetectionSource, MappingMethod
+
+#: build(source, config, rng) -> a method reading its settings from ``config``.
+MethodBuilder = Callable[["DetectionSource", "MapperConfig", PerceptionRange], "MappingMethod"]
+
+
+@dataclass(frozen=True)
+class MethodInfo:
+    """A registered method: its name, one line of help, and how it is built (exactly one of
+    ``variant`` and ``build``); ``learned_only``: it needs the learned detector's networks (it
+    cannot run on oracle or file detections)."""
+
+    name: str
+    help: str
+    variant: str | None = None
+    build: MethodBuilder | None = None
+    learned_only: bool = False
+
+    def __post_init__(self) -> None:
+        if (self.variant is None) == (self.build is None):
+            raise ValueError(f"method {self.name!r}: give exactly one of variant and build")
+
+
+_METHODS: dict[str, MethodInfo] = {}
+
+
+def register_method(info: MethodInfo) -> MethodInfo:
+    """Adds a method to the registry (ValueError for a name registered twice)."""
+    if info.name in _METHODS:
+        raise ValueError(f"method {info.name!r} is registered twice")
+    _METHODS[info.name] = info
+    return info
+
+
+def methods() -> dict[str, MethodInfo]:
+    """Every registered method by name, in table order (the learned mapper's variants first)."""
+    import icmapper.mapping.baselines  # noqa: F401  (each baseline module registers itself)
+
+    return dict(_METHODS)
+
+
+def method(name: str) -> MethodInfo:
+    """The method registered as ``name`` (ValueError listing the known names)."""
+    known = methods()
+    if name not in known:
+        raise ValueError(f"unknown method {name!r}; expected one of {', '.join(known)}")
+    return known[name]
+
+
+def _register_variants() -> None:
+    from icmapper.mapping.mapper import VARIANTS
+
+    for variant, v in VARIANTS.items():
+        name = "icmapper" if variant == "full" else f"icmapper-{variant}"
+        register_method(MethodInfo(name, v.help, variant=variant, learned_only=v.learned_only))
+
+
+_register_variants()

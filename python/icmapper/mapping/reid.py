@@ -1,0 +1,83 @@
+"""Re-identification of new tracks against the global map (an extension of IC-Mapper, documented
+in docs/mapping.md): a new track at least ``REID_MIN_OVERLAP`` of whose points lie within
+``reid_distance`` of a same-class global instance takes that instance's id, so that a lost and
+re-found track does not duplicate the map. Pure geometry on the sampled history; no state.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+from icmapper.mapping.tracker import _segments
+
+#: Share of a new track's points that must lie within ``reid_distance`` of a global instance for
+#: the track to take that instance's id.
+REID_MIN_OVERLAP = 0.5
+
+
+@dataclass
+class ReidDecision:
+    """What re-identification decided for one frame: ``renamed`` track id -> global id (the track
+    takes the instance's id), ``aliased`` track id -> global id (another piece of an instance
+    already matched this frame: the track keeps its id and maps into the instance)."""
+
+    renamed: dict[int, int] = field(default_factory=dict)
+    aliased: dict[int, int] = field(default_factory=dict)
+
+
+def reidentify(
+    det_classes: NDArray[np.int64],
+    det_points: NDArray[np.float32],
+    track_ids: NDArray[np.int64],
+    is_new: NDArray[np.bool_],
+    hist_row: dict[int, int],
+    hist_cls: NDArray[np.int64],
+    hist_pts: NDArray[np.float32],
+    limit: float,
+) -> ReidDecision:
+    """Decides which new tracks lie on a same-class global instance of the sampled history.
+
+    det_classes (k,), det_points (k, P, 2) ego metres, track_ids (k,) the tracker's ids,
+    is_new (k,) True where the track is neither in the map nor aliased yet; hist_row: global id
+    -> row of the sampled history (hist_cls (h,), hist_pts (h, S, 2) ego metres); limit: metres.
+    """
+    out = ReidDecision()
+    if limit <= 0 or not hist_row:
+        return out
+    taken = {int(i) for i in track_ids if int(i) in hist_row}
+    for j, tid in enumerate(track_ids.tolist()):
+        if not is_new[j] or tid in hist_row:
+            continue  # an existing instance: nothing to re-identify
+        cls = int(det_classes[j])
+        cands = [(gid, row) for gid, row in hist_row.items() if int(hist_cls[row]) == cls]
+        if not cands:
+            continue
+        hist = hist_pts[[r for _, r in cands]].astype(np.float64)  # (c, S, 2)
+        segs = _segments(hist, np.full(len(cands), cls == 0))  # (c, S, 2, 2)
+        dist = point_to_segments(det_points[j].astype(np.float64), segs)  # (c, P)
+        # share of the detection lying on the instance: a piece that slid along the instance or
+        # grew at the range edge still overlaps it over most of its length
+        overlap = (dist <= limit).mean(axis=1)  # (c,)
+        best = int(np.argmax(overlap - 1e-3 * dist.mean(axis=1)))
+        if overlap[best] < REID_MIN_OVERLAP:
+            continue
+        gid = cands[best][0]
+        if gid in taken:
+            out.aliased[tid] = gid
+        else:
+            out.renamed[tid] = gid
+            taken.add(gid)
+    return out
+
+
+def point_to_segments(p: NDArray[np.float64], seg: NDArray[np.float64]) -> NDArray[np.float64]:
+    """p (n, 2), seg (c, S, 2, 2) -> (c, n): distance of every point to the nearest segment."""
+    a, b = seg[:, None, :, 0], seg[:, None, :, 1]  # (c, 1, S, 2)
+    ab = b - a  # (c, 1, S, 2)
+    ap = p[None, :, None, :] - a  # (c, n, S, 2)
+    t = np.clip((ap * ab).sum(-1) / np.maximum((ab * ab).sum(-1), 1e-18), 0.0, 1.0)  # (c, n, S)
+    off = ap - t[..., None] * ab  # (c, n, S, 2)
+    return np.sqrt((off * off).sum(-1)).min(axis=2)  # (c, n)
