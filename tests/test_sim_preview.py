@@ -32,8 +32,6 @@ def test_cli_preview(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None
             [
                 "scenes",
                 "preview",
-                "--source",
-                "sim",
                 "--city",
                 "10004",
                 "--frame",
@@ -47,4 +45,10 @@ def test_cli_preview(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None
         )
     assert rc == 0 and out.is_file()
     assert "wrote" in capsys.readouterr().out
+    # a spec without a path, an unknown kind, a sequence out of range: clear errors (rc 1)
     assert main(["scenes", "preview", "--source", "av2", "--out", str(tmp_path / "x.png")]) == 1
+    assert main(["scenes", "preview", "--source", "foo:1", "--out", str(tmp_path / "x.png")]) == 1
+    bad = ["--source", "sim:val:1", "--sequence", "3", "--image-size", "32", "88"]
+    assert main(["scenes", "preview", *bad, "--out", str(tmp_path / "x.png")]) == 1
+    err = capsys.readouterr().err
+    assert "unknown kind 'foo'" in err and "has 1 sequence(s)" in err

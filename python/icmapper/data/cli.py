@@ -1,10 +1,12 @@
 """`icmapper scenes ...`: look at data. `scenes preview` writes the preview PNG of one frame of a
-synthetic sequence (`--source sim`) or of an Argoverse 2 log (`--source av2 --log DIR`)."""
+synthetic city's drive (`--city`, `--drive`) or of any sequence a source spec names (`--source
+SPEC --sequence I`, e.g. `--source av2:LOG_DIR`)."""
 
 from __future__ import annotations
 
 import argparse
 
+from icmapper.data.sources import SOURCE_KINDS
 from icmapper.data.types import PerceptionRange
 
 
@@ -16,13 +18,15 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "preview", help="write the six cameras and the BEV ground truth of one frame to a PNG"
     )
     p.add_argument(
-        "--source", choices=("sim", "av2"), default="sim", help="synthetic city or an AV2 log"
+        "--source",
+        default=None,
+        metavar="SPEC",
+        help="a source spec (default: the synthetic city --city, drive --drive); kinds: "
+        + ", ".join(k.usage for k in SOURCE_KINDS.values()),
     )
-    p.add_argument(
-        "--city", type=int, default=10_003, help="sim: city seed (val cities are 10000-10099)"
-    )
-    p.add_argument("--drive", type=int, default=0, help="sim: drive seed")
-    p.add_argument("--log", default=None, help="av2: log directory")
+    p.add_argument("--sequence", type=int, default=0, help="with --source: which sequence")
+    p.add_argument("--city", type=int, default=10_003, help="city seed (val: 10000-10099)")
+    p.add_argument("--drive", type=int, default=0, help="drive seed")
     p.add_argument("--frame", type=int, default=10, help="frame index")
     p.add_argument("--range", default="60x30", help="BEV perception range, e.g. 60x30 or 100x50")
     p.add_argument("--image-size", type=int, nargs=2, default=(128, 352), metavar=("H", "W"))
@@ -35,16 +39,19 @@ def _preview(args: argparse.Namespace) -> int:
     from icmapper.data.preview import preview_png
 
     size = (int(args.image_size[0]), int(args.image_size[1]))
-    if args.source == "sim":
+    if args.source is None:
         from icmapper.data.sim import sim_sequence
 
         seq = sim_sequence(args.city, args.drive, image_size=size)
     else:
-        if not args.log:
-            raise ValueError("--source av2 needs --log DIR (an Argoverse 2 log directory)")
-        from icmapper.data.av2 import load_av2_sequence
+        from icmapper.data.sources import open_source
 
-        seq = load_av2_sequence(args.log, image_size=size)
+        seqs = open_source(args.source, image_size=size)
+        if not 0 <= args.sequence < len(seqs):
+            raise ValueError(
+                f"--sequence {args.sequence}: {args.source} has {len(seqs)} sequence(s)"
+            )
+        seq = seqs[args.sequence]
     out = preview_png(seq, args.frame, args.out, PerceptionRange.from_name(args.range))
     print(f"wrote {out} ({seq.name}, frame {args.frame} of {len(seq)})")
     return 0

@@ -75,6 +75,7 @@ def run_methods(
 
     from icmapper.data import gt as gt_mod
     from icmapper.eval.runfmt import RunWriter
+    from icmapper.mapping.config import MapperConfig
     from icmapper.mapping.plot import plot_global_maps
     from icmapper.mapping.run import DetectionInput, map_sequence, method_factory
 
@@ -119,8 +120,8 @@ def run_methods(
     bar.close()
     for m in methods:
         writers[m].close()
-        used = config.to_dict() if config is not None else {}
-        _write_json_atomic(out / m / "mapper_config.json", used)
+        used = config if config is not None else MapperConfig()
+        _write_json_atomic(out / m / "mapper_config.json", used.to_dict())
         n = sum(len(s) for s in seqs)
         (out / m / "timing.json").write_text(
             json.dumps({"frames": n, "seconds": timings[m], "ms_per_frame": 1e3 * timings[m] / n})
