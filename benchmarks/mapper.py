@@ -1,4 +1,4 @@
-"""Per-frame latency of the online mapper by stage (`icmapper bench mapper`).
+"""Per-frame latency of the online mapper by stage (`python -m benchmarks mapper`).
 
 Runs the full IC-Mapper pipeline (detector, association, tracking, sampling, fusion, merge) over
 synthetic validation sequences with the shipped checkpoint (or a freshly initialised network of a
@@ -16,7 +16,7 @@ from icmapper.mapping.mapper import NETWORK_STAGES, STAGES, Mapper
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog="icmapper bench mapper", description=__doc__)
+    p = argparse.ArgumentParser(prog="python -m benchmarks mapper", description=__doc__)
     p.add_argument("--checkpoint", default=None, help="training checkpoint (default: shipped)")
     p.add_argument("--config", default="configs/small.toml", help="config without a checkpoint")
     p.add_argument("--source", default="sim:val:2")
@@ -24,12 +24,11 @@ def main(argv: list[str] | None = None) -> int:
     args = p.parse_args(argv)
 
     import torch
-
     from icmapper.data.sources import open_source
 
     torch.set_num_threads(args.threads)
     ckpt = args.checkpoint
-    default = Path(__file__).resolve().parents[3] / "checkpoints" / "small.pt"
+    default = Path(__file__).resolve().parents[1] / "checkpoints" / "small.pt"
     if ckpt is None and default.is_file():
         ckpt = str(default)
     if ckpt is None:
@@ -85,7 +84,3 @@ def _fresh_checkpoint(config: str) -> str:
         path, model=net.state_dict(), optimizer=None, stage=1, step=0, config=config_to_dict(cfg)
     )
     return str(path)
-
-
-if __name__ == "__main__":  # pragma: no cover
-    raise SystemExit(main())
