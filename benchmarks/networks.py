@@ -13,9 +13,9 @@ from collections.abc import Callable
 from pathlib import Path
 
 import torch
+from icmapper.testing.clips import SyntheticClips, collate_clips
 from icmapper.training.config import TrainConfig, load_config
 from icmapper.training.objectives import ICMapperNet, Stage1Objective, prev_to_cur
-from icmapper.training.synthetic import SyntheticClips, collate_clips
 
 
 def _time(fn: Callable[[], object], repeats: int) -> float:

@@ -9,11 +9,11 @@ import numpy as np
 import pytest
 import torch
 from icmapper.data.types import ego_to_world, world_to_ego
+from icmapper.testing.clips import SyntheticClips, collate_clips
 from icmapper.training.checkpoint import load_checkpoint, save_checkpoint
 from icmapper.training.config import config_from_dict, config_to_dict, load_config
 from icmapper.training.loop import train
 from icmapper.training.objectives import ICMapperNet, Stage1Objective, Stage2Objective
-from icmapper.training.synthetic import SyntheticClips, collate_clips
 
 REPO = Path(__file__).resolve().parents[1]
 
