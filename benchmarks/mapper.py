@@ -12,6 +12,7 @@ import argparse
 import time
 from pathlib import Path
 
+from icmapper.checkpoints import DEFAULT_CHECKPOINT
 from icmapper.mapping.mapper import NETWORK_STAGES, STAGES, Mapper
 
 
@@ -28,9 +29,8 @@ def main(argv: list[str] | None = None) -> int:
 
     torch.set_num_threads(args.threads)
     ckpt = args.checkpoint
-    default = Path(__file__).resolve().parents[1] / "checkpoints" / "small.pt"
-    if ckpt is None and default.is_file():
-        ckpt = str(default)
+    if ckpt is None and DEFAULT_CHECKPOINT.is_file():
+        ckpt = str(DEFAULT_CHECKPOINT)
     if ckpt is None:
         ckpt = _fresh_checkpoint(args.config)
         print(f"(no checkpoint: timing a freshly initialised network of {args.config})")

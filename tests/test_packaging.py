@@ -1,5 +1,6 @@
 """What the installed package holds: no benchmark modules, test helpers only under
-``icmapper.testing`` and never imported by the runtime modules."""
+``icmapper.testing`` and never imported by the runtime modules, the shipped checkpoint as package
+data that resolves and loads."""
 
 from __future__ import annotations
 
@@ -56,3 +57,18 @@ def test_synthetic_source_builds_clips_from_the_testing_package() -> None:
     )
     ds, _collate = build_dataset(cfg, stage=1)
     assert isinstance(ds, SyntheticClips) and len(ds) == 3
+
+
+def test_default_checkpoint_is_package_data_and_loads() -> None:
+    from icmapper.checkpoints import DEFAULT_CHECKPOINT
+    from icmapper.mapping.cli import DEFAULT_CHECKPOINT as cli_default
+    from icmapper.training.checkpoint import load_checkpoint
+
+    assert cli_default == DEFAULT_CHECKPOINT
+    assert DEFAULT_CHECKPOINT.is_file(), f"shipped checkpoint missing: {DEFAULT_CHECKPOINT}"
+    assert DEFAULT_CHECKPOINT.resolve().is_relative_to(PACKAGE), "not inside the package"
+    blob = load_checkpoint(DEFAULT_CHECKPOINT)
+    assert blob["config"]["model"]["num_cameras"] == 6 and blob["model"], "not the small config"
+    from icmapper import Mapper
+
+    Mapper.from_checkpoint(DEFAULT_CHECKPOINT)  # the weights fit the network they describe

@@ -12,9 +12,8 @@ import time
 from pathlib import Path
 from typing import Any
 
+from icmapper.checkpoints import DEFAULT_CHECKPOINT
 from icmapper.mapping.run import METHODS
-
-DEFAULT_CHECKPOINT = Path(__file__).resolve().parents[3] / "checkpoints" / "small.pt"
 
 
 def _source_tag(spec: str) -> str:
