@@ -1,11 +1,12 @@
 """Records the merges of the geometry benchmark's workload for the Rust replay tool.
 
-Runs ``icmapper bench geometry``'s per-frame workload (1000-instance synthetic city, 200 frames,
-~30 noisy detections per frame) through ``GlobalMap`` and writes, for every merge, the stored
-geometry before it and the detection: little-endian ``int64 cls, int64 n_global, int64 n_det``,
-then ``float64 global (n_global, 2)`` and ``float64 det (n_det, 2)``.
+Runs the per-frame workload of ``python -m benchmarks geometry`` (1000-instance synthetic city,
+200 frames, ~30 noisy detections per frame) through ``GlobalMap`` and writes, for every merge,
+the stored geometry before it and the detection: little-endian
+``int64 cls, int64 n_global, int64 n_det``, then ``float64 global (n_global, 2)`` and
+``float64 det (n_det, 2)``.
 
-Run: ``.venv/bin/python benchmarks/record_merges.py /tmp/merges.bin`` then
+Run (repository root): ``.venv/bin/python -m benchmarks.record_merges /tmp/merges.bin`` then
 ``cargo run --release -p icmap-geom --example replay_merges -- /tmp/merges.bin 5``.
 """
 
@@ -16,7 +17,8 @@ import sys
 from pathlib import Path
 
 import numpy as np
-from icmapper import bench
+
+from benchmarks import geometry as bench
 
 
 def record(path: Path, n: int = 1000, frames: int = 200, seed: int = 0) -> int:

@@ -7,7 +7,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
-from icmapper.data import nuscenes
 from icmapper.data.datasets import ClipDataset, ImageCache, SequenceDataset, collate_clips
 from icmapper.data.sources import open_source
 from icmapper.data.types import (
@@ -19,6 +18,7 @@ from icmapper.data.types import (
     WorldMap,
     xy_yaw_to_pose,
 )
+from icmapper.testing.nuscenes_fixture import write_nuscenes_fixture
 
 H, W, C = 4, 6, 2
 
@@ -138,7 +138,7 @@ def test_source_specs_errors() -> None:
 
 
 def test_source_nuscenes(tmp_path: Path) -> None:
-    root = nuscenes.write_fixture(tmp_path / "nus", "v1.0-mini")
+    root = write_nuscenes_fixture(tmp_path / "nus", "v1.0-mini")
     seqs = open_source(f"nuscenes:{root}", image_size=(32, 88), render=False)
     assert len(seqs) == 3
     with pytest.raises(ValueError, match="split file"):

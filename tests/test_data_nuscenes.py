@@ -10,13 +10,14 @@ import pytest
 from icmapper.data import gt, nuscenes
 from icmapper.data.errors import DataError
 from icmapper.data.types import MapClass, RANGE_60x30
+from icmapper.testing.nuscenes_fixture import write_nuscenes_fixture
 
 VERSION = "v1.0-mini"
 
 
 @pytest.fixture()
 def root(tmp_path: Path) -> Path:
-    return nuscenes.write_fixture(tmp_path / "nus", VERSION)
+    return write_nuscenes_fixture(tmp_path / "nus", VERSION)
 
 
 def test_reads_scenes_poses_and_rig(root: Path) -> None:
@@ -124,7 +125,7 @@ def test_map_missing_layer(root: Path) -> None:
 
 
 def test_scene_without_samples(tmp_path: Path) -> None:
-    root = nuscenes.write_fixture(tmp_path / "nus", VERSION, scene_lengths=(3, 0))
+    root = write_nuscenes_fixture(tmp_path / "nus", VERSION, scene_lengths=(3, 0))
     with pytest.raises(DataError, match="scene-0002 has no samples"):
         nuscenes.load_nuscenes(root, VERSION, render=False)
 

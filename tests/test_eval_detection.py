@@ -164,7 +164,7 @@ def test_id_change_on_same_gt_lowers_cmap() -> None:
 def test_matches_reference_implementation() -> None:
     """The vectorised AP equals the straightforward numpy + shapely reference on random data."""
     pytest.importorskip("shapely")
-    from icmapper.eval.bench import make_dataset, reference_ap
+    from benchmarks.evaluation import make_dataset, reference_ap
 
     pred, gt = make_dataset(num_seqs=3, num_frames=6, num_preds=30, half=(30.0, 15.0), seed=4)
     ours = detection_ap(pred, gt, TH)
@@ -175,8 +175,9 @@ def test_matches_reference_implementation() -> None:
 
 
 def test_blocked_matching_equals_single_block() -> None:
-    from icmapper.eval.bench import make_dataset
     from icmapper.eval.detection import match
+
+    from benchmarks.evaluation import make_dataset
 
     pred, gt = make_dataset(num_seqs=4, num_frames=5, num_preds=20, half=(30.0, 15.0), seed=7)
     one, many = match(pred, gt, 1.5), match(pred, gt, 1.5, block_rows=30)

@@ -15,7 +15,7 @@ from icmapper.models.decoder import MapDecoder
 from icmapper.models.detector import MapDetector
 from icmapper.models.fusion import FusionModule
 from icmapper.models.propagation import QueryPropagation
-from icmapper.training.synthetic import default_rig
+from icmapper.testing.clips import default_rig
 
 HX, HY = RANGE_60x30.half_x, RANGE_60x30.half_y
 MODEL = ModelConfig(

@@ -11,10 +11,10 @@ import torch
 from icmapper.data.types import ego_to_world, world_to_ego
 from icmapper.models.checkpoint import load_checkpoint, save_checkpoint
 from icmapper.models.network import ICMapperNet
+from icmapper.testing.clips import SyntheticClips, collate_clips
 from icmapper.training.config import config_from_dict, config_to_dict, load_config
 from icmapper.training.loop import train
 from icmapper.training.objectives import Stage1Objective, Stage2Objective
-from icmapper.training.synthetic import SyntheticClips, collate_clips
 
 REPO = Path(__file__).resolve().parents[1]
 

@@ -2,6 +2,10 @@
 
 Each feature module owns its sub-commands through a ``register(subparsers)`` function that adds
 parsers whose ``func`` attribute runs the command; this module only wires them together.
+
+The benchmark programs are not part of the installed package: they live in the repository's
+``benchmarks/`` folder and run with ``python -m benchmarks NAME`` from the repository root.
+``icmapper bench ...`` (their former command) exits with an error that says so.
 """
 
 from __future__ import annotations
@@ -16,7 +20,12 @@ _COMMAND_MODULES = (
     "icmapper.training.cli",  # train
     "icmapper.mapping.cli",  # map, compare
     "icmapper.eval.cli",  # eval
-    "icmapper.bench",  # bench geometry | render | eval | mapper
+)
+
+BENCH_MOVED = (
+    "icmapper bench: the benchmarks are not part of the installed package; from a checkout of the "
+    "repository run `python -m benchmarks geometry|render|eval|networks|mapper [options]` "
+    "(see BENCHMARKS.md)"
 )
 
 
@@ -38,6 +47,9 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
+    if (sys.argv[1:] if argv is None else argv)[:1] == ["bench"]:
+        print(f"error: {BENCH_MOVED}", file=sys.stderr)
+        return 2
     parser = build_parser()
     args = parser.parse_args(argv)
     if getattr(args, "func", None) is None:

@@ -17,8 +17,7 @@ from icmapper.data.sources import source_tag
 if TYPE_CHECKING:
     from icmapper.mapping.config import MapperConfig
 
-
-DEFAULT_CHECKPOINT = Path(__file__).resolve().parents[3] / "checkpoints" / "small.pt"
+from icmapper.checkpoints import DEFAULT_CHECKPOINT
 
 
 def _open(spec: str, image_size: tuple[int, int], seed: int, render: bool) -> list[Any]:
@@ -227,7 +226,7 @@ def _common(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--checkpoint",
         default=str(DEFAULT_CHECKPOINT) if DEFAULT_CHECKPOINT.is_file() else None,
-        help="training checkpoint (default: the shipped checkpoints/small.pt)",
+        help="training checkpoint (default: icmapper.checkpoints.DEFAULT_CHECKPOINT)",
     )
     p.add_argument("--out", required=True, help="output folder")
     p.add_argument("--seed", type=int, default=0)

@@ -29,7 +29,6 @@ from icmapper.models.network import ICMapperNet
 from icmapper.training.config import TrainConfig, config_to_dict
 from icmapper.training.distributed import DistInfo, barrier, init_distributed, mean_over_ranks
 from icmapper.training.objectives import Stage1Objective, Stage2Objective
-from icmapper.training.synthetic import SyntheticClips, collate_clips
 
 
 def param_digest(module: torch.nn.Module) -> str:
@@ -56,6 +55,8 @@ def build_dataset(cfg: TrainConfig, stage: int) -> tuple[Dataset, Any]:
     clip_len = cfg.data.clip_len if stage == 1 else cfg.stage2.clip_len
     spec = cfg.data.source
     if spec.startswith("synthetic:"):
+        from icmapper.testing.clips import SyntheticClips, collate_clips
+
         try:
             num = int(spec.split(":", 1)[1])
         except ValueError:

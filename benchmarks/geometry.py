@@ -1,15 +1,9 @@
-"""`icmapper bench ...`: benchmark programs that print measured numbers and ratios (never assert).
+"""Geometry engine benchmark (``python -m benchmarks geometry``): prints measured numbers and
+ratios (never asserts).
 
-Sub-commands are looked up lazily in ``BENCHMARKS`` (name -> ``("module:run", "module:options")``),
-so that ``icmapper --help`` imports neither torch nor a benchmark's dependencies: ``options`` (or
-None) adds the benchmark's arguments to an ``argparse.ArgumentParser``, ``run`` takes the parsed
-``argparse.Namespace`` and returns an exit code. To add ``bench render``, ``bench eval`` or
-``bench mapper``, add one entry to ``BENCHMARKS``.
-
-This module also holds the geometry benchmark (``icmapper bench geometry``): one per-frame
-workload of the online mapper — query the expanded patch (60 x 30 m range + 20 m margin), sample 20
-points for every instance in it, merge ~30 detections — run with the native engine
-(``icmapper.GlobalMap``) and with a plain-Python reference built on shapely (STRtree query,
+One per-frame workload of the online mapper — query the expanded patch (60 x 30 m range + 20 m
+margin), sample 20 points for every instance in it, merge ~30 detections — run with the native
+engine (``icmapper.GlobalMap``) and with a plain-Python reference built on shapely (STRtree query,
 intersection clipping, interpolation) and scipy (``splprep``/``splev`` merge fit) on identical
 inputs, on synthetic city-like maps of 1e2 .. 1e5 instances.
 """
@@ -19,71 +13,13 @@ from __future__ import annotations
 import argparse
 import contextlib
 import gc
-import importlib
 import math
-import sys
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-
-# name -> ("module:run", "module:add_options" or None), imported only when the sub-command runs.
-BENCHMARKS: dict[str, tuple[str, str | None]] = {
-    "geometry": ("icmapper.bench:run_geometry", "icmapper.bench:add_geometry_arguments"),
-    "render": ("icmapper.data.sim.bench:run_render_bench", "icmapper.data.sim.bench:add_arguments"),
-    # "argv": the module's own main(argv) parses the arguments.
-    "eval": ("icmapper.eval.bench:main", "argv"),
-    "networks": ("icmapper.training.bench:main", "argv"),
-    "mapper": ("icmapper.mapping.bench:main", "argv"),
-}
-
-HELP = {
-    "geometry": "native geometry engine vs shapely/scipy reference, per-frame workload",
-    "render": "camera renderer frames/s (6 cameras)",
-    "eval": "all metrics on 150 sequences x 40 frames x 50 predictions vs numpy+shapely AP",
-    "networks": "training steps/s and per-module inference latency (small config)",
-    "mapper": "per-frame latency of the online mapper by stage",
-}
-
-
-def _resolve(spec: str) -> Callable[..., Any]:
-    """``"package.module:function"`` -> the function (imports the module)."""
-    module_name, func_name = spec.split(":")
-    return getattr(importlib.import_module(module_name), func_name)
-
-
-def _run_lazily(name: str) -> Callable[[argparse.Namespace], int]:
-    def run(args: argparse.Namespace) -> int:
-        run_spec, options_spec = BENCHMARKS[name]
-        if options_spec == "argv":
-            return int(_resolve(run_spec)(list(args.bench_args)) or 0)
-        parser = argparse.ArgumentParser(prog=f"icmapper bench {name}")
-        if options_spec is not None:
-            _resolve(options_spec)(parser)
-        return int(_resolve(run_spec)(parser.parse_args(args.bench_args)) or 0)
-
-    return run
-
-
-def register(subparsers: argparse._SubParsersAction) -> None:
-    """Adds ``bench`` with one sub-command per entry of ``BENCHMARKS`` (options parsed lazily)."""
-    bench = subparsers.add_parser("bench", help="benchmark programs (print ratios)")
-    sub = bench.add_subparsers(dest="bench", metavar="BENCHMARK")
-    for name in BENCHMARKS:
-        p = sub.add_parser(
-            name,
-            help=HELP.get(name, f"{name} benchmark"),
-            add_help=False,  # `--help` goes to the benchmark's own parser
-            prefix_chars="\0",  # no options here: every argument goes to the benchmark's parser
-        )
-        p.add_argument("bench_args", nargs="*")
-        p.set_defaults(func=_run_lazily(name))
-
-
-# =============================================================================================
-# geometry benchmark
 
 RANGE = (30.0, 15.0)  # half extents of the 60 x 30 m perception range
 MARGIN = 20.0
@@ -548,11 +484,7 @@ def _run_geometry(args: argparse.Namespace) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """``python -m icmapper.bench [geometry options]``: the geometry benchmark."""
-    parser = argparse.ArgumentParser(prog="python -m icmapper.bench", description=__doc__)
+    """``python -m benchmarks geometry [options]``: the geometry benchmark."""
+    parser = argparse.ArgumentParser(prog="python -m benchmarks geometry", description=__doc__)
     add_geometry_arguments(parser)
     return run_geometry(parser.parse_args(argv))
-
-
-if __name__ == "__main__":
-    sys.exit(main())

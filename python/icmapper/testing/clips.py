@@ -1,4 +1,5 @@
-"""Tiny synthetic clips in the ``ClipDataset`` item format, for tests and benchmarks only.
+"""Tiny synthetic clips in the ``ClipDataset`` item format, for tests, benchmarks and the training
+config's ``data.source = "synthetic:N"`` (smoke runs; no dataset needed).
 
 Images are seeded noise, GT instances random straight/zig-zag polylines and crossings fixed in a
 world frame, seen from an ego driving straight ahead. Not a simulator (see ``icmapper.data.sim``).

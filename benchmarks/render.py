@@ -2,12 +2,11 @@
 256x704 (one frame = all six images), measured over a synthetic drive after a warm-up frame, plus
 the one-off costs (city generation, raster painting). Prints numbers; asserts nothing.
 
-Run: `.venv/bin/python -m icmapper.data.sim.bench [--frames N] [--city SEED]`."""
+Run (repository root): `.venv/bin/python -m benchmarks render [--frames N] [--city SEED]`."""
 
 from __future__ import annotations
 
 import argparse
-import sys
 import time
 
 from icmapper.data.sim.city import generate_city
@@ -53,10 +52,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m icmapper.data.sim.bench", description=__doc__)
+    parser = argparse.ArgumentParser(prog="python -m benchmarks render", description=__doc__)
     add_arguments(parser)
     return run_render_bench(parser.parse_args(argv))
-
-
-if __name__ == "__main__":
-    sys.exit(main())

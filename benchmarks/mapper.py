@@ -1,4 +1,4 @@
-"""Per-frame latency of the online mapper by stage (`icmapper bench mapper`).
+"""Per-frame latency of the online mapper by stage (`python -m benchmarks mapper`).
 
 Runs the full IC-Mapper pipeline (detector, association, tracking, sampling, fusion, merge) over
 synthetic validation sequences with the shipped checkpoint (or a freshly initialised network of a
@@ -12,11 +12,12 @@ import argparse
 import time
 from pathlib import Path
 
+from icmapper.checkpoints import DEFAULT_CHECKPOINT
 from icmapper.mapping.mapper import NETWORK_STAGES, STAGES, Mapper
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog="icmapper bench mapper", description=__doc__)
+    p = argparse.ArgumentParser(prog="python -m benchmarks mapper", description=__doc__)
     p.add_argument("--checkpoint", default=None, help="training checkpoint (default: shipped)")
     p.add_argument("--config", default="configs/small.toml", help="config without a checkpoint")
     p.add_argument("--source", default="sim:val:2")
@@ -24,23 +25,19 @@ def main(argv: list[str] | None = None) -> int:
     args = p.parse_args(argv)
 
     import torch
-
     from icmapper.data.sources import open_source
 
     torch.set_num_threads(args.threads)
     ckpt = args.checkpoint
-    default = Path(__file__).resolve().parents[3] / "checkpoints" / "small.pt"
-    if ckpt is None and default.is_file():
-        ckpt = str(default)
+    if ckpt is None and DEFAULT_CHECKPOINT.is_file():
+        ckpt = str(DEFAULT_CHECKPOINT)
     if ckpt is None:
         ckpt = _fresh_checkpoint(args.config)
         print(f"(no checkpoint: timing a freshly initialised network of {args.config})")
     mapper = Mapper.from_checkpoint(ckpt)
-    from icmapper.models.checkpoint import load_checkpoint
-    from icmapper.training.config import config_from_dict
+    from icmapper.models.network import checkpoint_settings
 
-    cfg = config_from_dict(load_checkpoint(ckpt)["config"])
-    seqs = open_source(args.source, image_size=tuple(cfg.data.image_size))
+    seqs = open_source(args.source, image_size=checkpoint_settings(ckpt)[1])
     totals = dict.fromkeys(STAGES, 0.0)
     frames = 0
     render = 0.0
@@ -85,7 +82,3 @@ def _fresh_checkpoint(config: str) -> str:
         path, model=net.state_dict(), optimizer=None, stage=1, step=0, config=config_to_dict(cfg)
     )
     return str(path)
-
-
-if __name__ == "__main__":  # pragma: no cover
-    raise SystemExit(main())

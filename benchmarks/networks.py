@@ -1,6 +1,6 @@
 """Benchmark of the networks: training steps/s and per-frame inference latency per module.
 
-``python -m icmapper.training.bench [--config configs/small.toml] [--steps 10] [--frames 10]``
+``python -m benchmarks networks [--config configs/small.toml] [--steps 10] [--frames 10]``
 Prints measured numbers (random images of the config's size; no dataset needed).
 """
 
@@ -13,11 +13,10 @@ from collections.abc import Callable
 from pathlib import Path
 
 import torch
-
 from icmapper.models.network import ICMapperNet
+from icmapper.testing.clips import SyntheticClips, collate_clips
 from icmapper.training.config import TrainConfig, load_config
 from icmapper.training.objectives import Stage1Objective, prev_to_cur
-from icmapper.training.synthetic import SyntheticClips, collate_clips
 
 
 def _time(fn: Callable[[], object], repeats: int) -> float:
@@ -97,7 +96,9 @@ def bench_inference(cfg: TrainConfig, repeats: int) -> dict[str, float]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(
+        prog="python -m benchmarks networks", description=__doc__.splitlines()[0]
+    )
     ap.add_argument("--config", type=Path, default=Path("configs/small.toml"))
     ap.add_argument("--steps", type=int, default=10)
     ap.add_argument("--frames", type=int, default=10)
@@ -120,7 +121,3 @@ def main(argv: list[str] | None = None) -> int:
     for name, ms in bench_inference(cfg, args.frames).items():
         print(f"  inference {name:32s} {ms:8.2f} ms/frame")
     return 0
-
-
-if __name__ == "__main__":
-    raise SystemExit(main())

@@ -1,4 +1,4 @@
-"""Evaluation benchmark: ``python -m icmapper.eval.bench [--seqs 150 --frames 40 --preds 50]``.
+"""Evaluation benchmark: ``python -m benchmarks eval [--seqs 150 --frames 40 --preds 50]``.
 
 Builds a synthetic workload (seeded) of S sequences x T frames x P predictions per frame at both
 perception ranges (ground-truth tracks of dividers, boundaries and crossings; noisy predictions
@@ -16,12 +16,11 @@ import argparse
 import time
 
 import numpy as np
-from numpy.typing import NDArray
-
 from icmapper.eval.chamfer import NUM_SAMPLES, Resampled, chamfer_pairs, group_pairs
 from icmapper.eval.detection import CLASS_NAMES, THRESHOLDS, average_precision
 from icmapper.eval.instances import Instances
 from icmapper.eval.runfmt import FramePredictions
+from numpy.typing import NDArray
 
 
 class _GT:
@@ -206,7 +205,7 @@ def _time_backends(pred: Instances, gt: Instances, max_pairs: int) -> dict[str, 
 def main(argv: list[str] | None = None) -> int:
     from icmapper.eval.evaluate import _gt_table, _pred_table, evaluate
 
-    ap = argparse.ArgumentParser(prog="python -m icmapper.eval.bench", description=__doc__)
+    ap = argparse.ArgumentParser(prog="python -m benchmarks eval", description=__doc__)
     ap.add_argument("--seqs", type=int, default=150)
     ap.add_argument("--frames", type=int, default=40)
     ap.add_argument("--preds", type=int, default=50)
@@ -257,7 +256,3 @@ def main(argv: list[str] | None = None) -> int:
     print(f"total evaluate time, both ranges: {total:.2f} s wall, {total_cpu:.2f} s CPU "
           "(bound: 60 s)")  # fmt: skip
     return 0
-
-
-if __name__ == "__main__":  # pragma: no cover
-    raise SystemExit(main())

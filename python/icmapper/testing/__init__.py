@@ -1,0 +1,11 @@
+"""Test and demo helpers that ship with the package but are not part of the runtime pipeline.
+
+- ``icmapper.testing.clips``: tiny random clips in the ``ClipDataset`` item format
+  (``SyntheticClips``, ``collate_clips``, ``default_rig``); the training config's
+  ``data.source = "synthetic:N"`` builds them (imported lazily by the training loop).
+- ``icmapper.testing.nuscenes_fixture``: ``write_nuscenes_fixture`` writes a tiny nuScenes-format
+  dataset to disk.
+
+Nothing in the runtime package imports this package at module level, and this ``__init__`` imports
+nothing (``clips`` needs torch).
+"""

@@ -1,0 +1,74 @@
+"""What the installed package holds: no benchmark modules, test helpers only under
+``icmapper.testing`` and never imported by the runtime modules, the shipped checkpoint as package
+data that resolves and loads."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import icmapper
+
+PACKAGE = Path(icmapper.__file__).resolve().parent
+
+#: Runtime modules a user imports to map, train and evaluate (each imported in a fresh process).
+RUNTIME_MODULES = (
+    "icmapper",
+    "icmapper.cli",
+    "icmapper.data.sources",
+    "icmapper.data.nuscenes",
+    "icmapper.training.loop",
+    "icmapper.mapping.mapper",
+    "icmapper.mapping.cli",
+    "icmapper.eval.evaluate",
+)
+
+
+def test_no_benchmark_modules_in_the_package() -> None:
+    bench = sorted(str(p.relative_to(PACKAGE)) for p in PACKAGE.rglob("bench*.py"))
+    assert bench == [], f"benchmark modules belong in benchmarks/, found {bench}"
+
+
+def test_runtime_modules_do_not_import_the_testing_helpers() -> None:
+    code = (
+        "import importlib, sys\n"
+        f"for name in {RUNTIME_MODULES!r}:\n"
+        "    importlib.import_module(name)\n"
+        "loaded = sorted(m for m in sys.modules if m.startswith('icmapper.testing'))\n"
+        "print(','.join(loaded))\n"
+    )
+    env = {**os.environ, "PYTHONPATH": str(PACKAGE.parent)}
+    out = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=120
+    )
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == "", f"runtime imports test helpers: {out.stdout.strip()}"
+
+
+def test_synthetic_source_builds_clips_from_the_testing_package() -> None:
+    from icmapper.testing.clips import SyntheticClips
+    from icmapper.training.config import config_from_dict
+    from icmapper.training.loop import build_dataset
+
+    cfg = config_from_dict(
+        {"data": {"source": "synthetic:3", "clip_len": 2, "image_size": [16, 32]}}
+    )
+    ds, _collate = build_dataset(cfg, stage=1)
+    assert isinstance(ds, SyntheticClips) and len(ds) == 3
+
+
+def test_default_checkpoint_is_package_data_and_loads() -> None:
+    from icmapper.checkpoints import DEFAULT_CHECKPOINT
+    from icmapper.mapping.cli import DEFAULT_CHECKPOINT as cli_default
+    from icmapper.training.checkpoint import load_checkpoint
+
+    assert cli_default == DEFAULT_CHECKPOINT
+    assert DEFAULT_CHECKPOINT.is_file(), f"shipped checkpoint missing: {DEFAULT_CHECKPOINT}"
+    assert DEFAULT_CHECKPOINT.resolve().is_relative_to(PACKAGE), "not inside the package"
+    blob = load_checkpoint(DEFAULT_CHECKPOINT)
+    assert blob["config"]["model"]["num_cameras"] == 6 and blob["model"], "not the small config"
+    from icmapper import Mapper
+
+    Mapper.from_checkpoint(DEFAULT_CHECKPOINT)  # the weights fit the network they describe
