@@ -42,7 +42,10 @@ def _world() -> WorldMap:
 
 def _seq(xs: np.ndarray, world: WorldMap | None = None, source: str = "sim") -> Sequence:
     poses = np.stack([xy_yaw_to_pose(float(x), 0.0, 0.0) for x in xs])
-    return Sequence("toy", source, world or _world(), np.arange(len(xs)) * 0.5, poses, _rig())
+    # nuScenes' world instances carry no identity across frames: ids come from matching
+    by_matching = source == "nuscenes"
+    ts = np.arange(len(xs)) * 0.5
+    return Sequence("toy", source, world or _world(), ts, poses, _rig(), None, by_matching)
 
 
 def test_frame_gt_clips_inside_range_and_samples_20_points() -> None:

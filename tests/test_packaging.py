@@ -62,7 +62,7 @@ def test_synthetic_source_builds_clips_from_the_testing_package() -> None:
 def test_default_checkpoint_is_package_data_and_loads() -> None:
     from icmapper.checkpoints import DEFAULT_CHECKPOINT
     from icmapper.mapping.cli import DEFAULT_CHECKPOINT as cli_default
-    from icmapper.training.checkpoint import load_checkpoint
+    from icmapper.models.checkpoint import load_checkpoint
 
     assert cli_default == DEFAULT_CHECKPOINT
     assert DEFAULT_CHECKPOINT.is_file(), f"shipped checkpoint missing: {DEFAULT_CHECKPOINT}"
