@@ -19,11 +19,11 @@ from collections.abc import Sequence as Seq
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.spatial import cKDTree
 
-from icmapper.eval.chamfer import NUM_SAMPLES, resample
+from icmapper.eval.chamfer import NUM_SAMPLES
 from icmapper.eval.detection import CLASS_NAMES, detection_ap, mean_ignore_nan
 from icmapper.eval.instances import Instances
+from icmapper.geom import cloud_chamfer, resample_many
 
 #: Dense sampling step (metres) and per-class point cap of the CD metric.
 CD_STEP = 0.5
@@ -37,7 +37,7 @@ def dense_sample(points: NDArray[np.floating], closed: bool, step: float = CD_ST
     ring = np.vstack([pts, pts[:1]]) if closed else pts
     length = float(np.linalg.norm(np.diff(ring, axis=0), axis=1).sum())
     m = int(np.ceil(length / step)) + (0 if closed else 1)
-    return resample(pts[None], max(m, 1), closed)[0]
+    return resample_many(pts[None], max(m, 1), closed)[0]
 
 
 def _class_cloud(
@@ -52,15 +52,14 @@ def _class_cloud(
     return cloud
 
 
-def cloud_chamfer(a: NDArray[np.float64], b: NDArray[np.float64]) -> float:
-    """(mean nearest a->b + mean nearest b->a) / 2 of point clouds (n, 2), (m, 2)."""
+def class_cd(a: NDArray[np.float64], b: NDArray[np.float64]) -> float:
+    """CD of one class: ``geom.cloud_chamfer`` of the pooled samples (n, 2), (m, 2); NaN when
+    both are empty, inf when one is."""
     if a.shape[0] == 0 and b.shape[0] == 0:
         return float("nan")
     if a.shape[0] == 0 or b.shape[0] == 0:
         return float("inf")
-    dab, _ = cKDTree(b).query(a)
-    dba, _ = cKDTree(a).query(b)
-    return 0.5 * (float(dab.mean()) + float(dba.mean()))
+    return cloud_chamfer(a, b)
 
 
 def map_cd(
@@ -71,7 +70,7 @@ def map_cd(
 ) -> dict[str, float]:
     """CD per class between one predicted and one GT global map: (cls, points (n, 2), closed)."""
     return {
-        name: cloud_chamfer(_class_cloud(pred, c, step, cap), _class_cloud(gt, c, step, cap))
+        name: class_cd(_class_cloud(pred, c, step, cap), _class_cloud(gt, c, step, cap))
         for c, name in enumerate(CLASS_NAMES)
     }
 
@@ -80,7 +79,7 @@ def _table(seq_instances: Seq[Seq[tuple[int, NDArray, bool, float]]]) -> Instanc
     rows = [(s, *inst) for s, insts in enumerate(seq_instances) for inst in insts]
     if not rows:
         return Instances.empty(NUM_SAMPLES)
-    pts = [resample(np.asarray(r[2])[None], NUM_SAMPLES, r[3])[0] for r in rows]
+    pts = [resample_many(np.asarray(r[2])[None], NUM_SAMPLES, r[3])[0] for r in rows]
     n = len(rows)
     return Instances(
         np.array([r[0] for r in rows], dtype=np.int64),
