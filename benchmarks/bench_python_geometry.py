@@ -18,7 +18,8 @@ and prints the ratio (values are checked to agree before timing):
 5. numpy-only forms (no engine equivalent), timed for reference: ``point_to_segments`` (tracker
    affinity) and ``paired_nearest_sq`` on the 41-point coarse sets (evaluation pruning bound).
 
-Run: ``.venv/bin/python benchmarks/bench_python_geometry.py [--rows 20000] [--repeat 3]``.
+Run: ``.venv/bin/python benchmarks/bench_python_geometry.py [--rows 20000] [--pairs 2000]
+[--clouds 300 1000 3000 20000] [--repeat 3]``.
 Medians of ``--repeat`` runs; single-threaded numpy is not enforced (set OMP_NUM_THREADS=1 for
 stable numbers on a shared machine).
 """
@@ -94,6 +95,9 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--rows", type=int, default=20_000, help="instances in the resampling table")
     ap.add_argument("--pairs", type=int, default=2_000, help="200-point pairs, exact Chamfer")
+    ap.add_argument(
+        "--clouds", type=int, nargs="+", default=[300, 1_000, 3_000, 20_000], help="cloud sizes"
+    )
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--seed", type=int, default=0)
     args = ap.parse_args(argv)
@@ -132,7 +136,7 @@ def main(argv: list[str] | None = None) -> int:
     print(f"{'':44s} largest difference {diff:.1e} m")
 
     # 4. Large clouds (global-map CD: up to 200,000 points per class and side).
-    for n in (300, 1_000, 3_000, 20_000):
+    for n in args.clouds:
         ca = rng.uniform(0, 500, size=(n, 2))  # (n, 2)
         cb = ca + rng.normal(0, 0.3, size=(n, 2))  # (n, 2)
         diff = abs(_kd_chamfer(ca, cb) - geom.chamfer_distance(ca, cb))
