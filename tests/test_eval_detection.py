@@ -4,11 +4,12 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from icmapper.eval.chamfer import Resampled, chamfer_matrix, resample, sparse_chamfer
+from icmapper.eval.chamfer import Resampled, sparse_chamfer
 from icmapper.eval.consistency import consistency_map
 from icmapper.eval.detection import average_precision, detection_ap
 from icmapper.eval.globalmap import global_metrics, map_cd
 from icmapper.eval.instances import from_frames
+from icmapper.geom import chamfer_matrix, resample_many
 
 TH = (0.5, 1.0, 1.5)
 
@@ -21,7 +22,7 @@ def line(y: float, x0: float = -10.0, length: float = 20.0) -> np.ndarray:
 def crossing(x: float) -> np.ndarray:
     """(20, 2) closed rectangle 4 x 8 m (ring, first point not repeated)."""
     ring = np.array([[x, -4.0], [x + 4, -4.0], [x + 4, 4.0], [x, 4.0], [x, -4.0]])
-    return resample(ring[None], 21)[0, :20]
+    return resample_many(ring[None], 21)[0, :20]
 
 
 def tables(gt_frames, pred_frames, seq: int = 0):
@@ -37,7 +38,7 @@ def test_resample_matches_shapely() -> None:
     rng = np.random.default_rng(0)
     pts = np.cumsum(rng.normal(size=(8, 20, 2)), axis=1)
     for closed in (False, True):
-        ours = resample(pts, 200, closed)
+        ours = resample_many(pts, 200, closed)
         for k in range(8):
             ring = np.vstack([pts[k], pts[k][:1]]) if closed else pts[k]
             ls = shapely.LineString(ring)

@@ -71,7 +71,7 @@ def _line(y: float, x0: float = -10.0) -> np.ndarray:
 def test_pipeline_matches_motmetrics_on_chamfer() -> None:
     """End to end through Chamfer matching with a gate: same numbers as motmetrics fed the same
     gated Chamfer distances."""
-    from icmapper.eval.chamfer import chamfer_matrix, resample
+    from icmapper.geom import chamfer_matrix, resample_many
 
     rng = np.random.default_rng(3)
     gt_frames, pred_frames, ref_frames = [], [], []
@@ -85,7 +85,7 @@ def test_pipeline_matches_motmetrics_on_chamfer() -> None:
         scores = rng.uniform(0.5, 1.0, 5)
         gt_frames.append((g_ids[keep], np.ones(keep.sum(), int), g_pts[keep], None))
         pred_frames.append((h_ids, np.ones(5, int), h_pts, scores))
-        d = chamfer_matrix(resample(g_pts[keep], 200), resample(h_pts, 200))
+        d = chamfer_matrix(resample_many(g_pts[keep], 200), resample_many(h_pts, 200))
         d[d > 1.5] = np.nan
         ref_frames.append((g_ids[keep], h_ids, d))
     gt, pred = from_frames(0, gt_frames), from_frames(0, pred_frames)

@@ -10,7 +10,6 @@ import pytest
 from icmapper.data.types import xy_yaw_to_pose
 from icmapper.mapping.tracker import (
     Tracker,
-    chamfer_matrix_np,
     match_scores,
     polyline_chamfer_matrix,
     positional_affinity,
@@ -143,17 +142,6 @@ def test_positional_affinity() -> None:
     assert aff[1, 1] == 0.0  # other class
     assert 0.0 <= aff.min() and aff.max() <= 1.0
     assert positional_affinity(det[:0], np.zeros(0), trk, np.array([1, 2])).shape == (0, 2)
-
-
-def test_chamfer_matrix_np_against_direct_formula() -> None:
-    rng = np.random.default_rng(0)
-    a = rng.normal(size=(3, 7, 2))
-    b = rng.normal(size=(2, 5, 2))
-    cd = chamfer_matrix_np(a, b)
-    for i in range(3):
-        for j in range(2):
-            d = np.linalg.norm(a[i][:, None] - b[j][None], axis=2)
-            assert cd[i, j] == pytest.approx(0.5 * (d.min(1).mean() + d.min(0).mean()))
 
 
 def test_polyline_chamfer_matrix_against_shapely() -> None:

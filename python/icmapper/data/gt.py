@@ -27,7 +27,6 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import linear_sum_assignment
-from scipy.spatial.distance import cdist
 
 from icmapper.data.types import (
     NUM_INSTANCE_POINTS,
@@ -63,12 +62,6 @@ def _length(points: NDArray[np.float64], closed: bool) -> float:
 def _area(ring: NDArray[np.float64]) -> float:
     x, y = ring[:, 0], ring[:, 1]
     return 0.5 * abs(float(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1))))
-
-
-def chamfer(a: NDArray[np.floating], b: NDArray[np.floating]) -> float:
-    """(mean nearest a->b + mean nearest b->a) / 2 for (n, 2) and (m, 2) point sets."""
-    d = cdist(a, b)  # (n, m)
-    return float((d.min(axis=1).mean() + d.min(axis=0).mean()) / 2.0)
 
 
 @dataclass
@@ -165,6 +158,8 @@ class PieceIds:
 
     def assign(self, pieces: list[_Piece]) -> list[int]:
         """GT ids of the pieces of one frame (in the given order)."""
+        from icmapper import geom
+
         ids = [0] * len(pieces)
         by_world: dict[int, list[int]] = {}
         for k, p in enumerate(pieces):
@@ -173,8 +168,8 @@ class PieceIds:
             prev = self._last.get(wid, [])
             taken: dict[int, int] = {}
             if prev:
-                cost = np.array(
-                    [[chamfer(pieces[m].points, q) for _, q in prev] for m in members]
+                cost = geom.chamfer_matrix(
+                    [pieces[m].points for m in members], [q for _, q in prev]
                 )  # (members, prev)
                 rows, cols = linear_sum_assignment(cost)
                 for r, c in zip(rows, cols, strict=True):
@@ -254,6 +249,8 @@ def derive_ids_by_matching(
     assignment on the Chamfer distance; pairs above `gate` (m) are not matched; unmatched current
     instances get new ids 0, 1, 2, ... in order of appearance. Returns new FrameGTs (same
     classes and points); `poses` (T, 4, 4) ego->world."""
+    from icmapper import geom
+
     poses = np.asarray(poses, dtype=np.float64)
     if len(frames_gt) != len(poses):
         raise ValueError(f"{len(frames_gt)} frames of GT but {len(poses)} poses")
@@ -271,7 +268,7 @@ def derive_ids_by_matching(
                 warped = [
                     world_to_ego(ego_to_world(prev.points[j], poses[t - 1]), poses[t]) for j in pi
                 ]
-                cost = np.array([[chamfer(cur.points[i], w) for w in warped] for i in ci])
+                cost = geom.chamfer_matrix(cur.points[ci], warped)  # (ci, pi)
                 rows, cols = linear_sum_assignment(cost)
                 for r, col in zip(rows, cols, strict=True):
                     if cost[r, col] <= gate:
@@ -317,14 +314,11 @@ def _arc_start(line: NDArray[np.float64], point: NDArray[np.float64]) -> float:
 
 def _cut(line: NDArray[np.float64], s0: float, s1: float) -> NDArray[np.float64]:
     """The part of `line` between arc lengths s0 < s1 (interpolated ends, inner vertices kept)."""
-    cum = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(line, axis=0), axis=1))])
+    from icmapper import geom
+
+    cum = geom.arc_lengths(line)  # (n,)
     inner = (cum > s0) & (cum < s1)
-    ends = (
-        [np.interp(s, cum, line[:, 0]) for s in (s0, s1)],
-        [np.interp(s, cum, line[:, 1]) for s in (s0, s1)],
-    )
-    start = np.array([ends[0][0], ends[1][0]])
-    stop = np.array([ends[0][1], ends[1][1]])
+    start, stop = geom.points_at_lengths(line, [s0, s1])  # (2,), (2,)
     return np.vstack([start, line[inner], stop])
 
 

@@ -1,9 +1,10 @@
-"""Chamfer distances between map instances, as the evaluation protocol defines them (numpy).
+"""Chamfer distances between map instances, as the evaluation protocol defines them.
 
 Protocol (StreamMapNet / IC-Mapper): both instances are resampled to ``NUM_SAMPLES = 200`` points
 evenly spaced by arc length (a closed crossing along its closed contour, the start point not
 repeated) and ``chamfer = (sum of nearest distances a->b + sum of nearest distances b->a) / (2 N)``,
-i.e. the mean of the two directed mean nearest distances.
+i.e. the mean of the two directed mean nearest distances. The geometry itself (resampling, exact
+Chamfer, paired nearest distances) is ``icmapper.geom``'s; this module adds the pruning.
 
 Speed: the metrics only need the exact Chamfer distance of pairs that can lie under the largest
 threshold / gate. :func:`sparse_chamfer` therefore prunes candidate pairs with two *provable* lower
@@ -15,11 +16,22 @@ metrics is the same as with the dense matrix. This module does no I/O.
 
 from __future__ import annotations
 
-import functools
 from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
+
+from icmapper.geom import chamfer_pairs, paired_nearest_sq, resample_many
+
+__all__ = [
+    "COARSE_INDEX",
+    "NUM_SAMPLES",
+    "Resampled",
+    "chamfer_lower_bound",
+    "chamfer_pairs",
+    "group_pairs",
+    "sparse_chamfer",
+]
 
 #: Points per instance in the evaluation protocol.
 NUM_SAMPLES = 200
@@ -29,73 +41,10 @@ COARSE_INDEX = np.r_[np.arange(0, NUM_SAMPLES, 5), NUM_SAMPLES - 1]  # (41,)
 # COARSE_INDEX, and the fraction of fine samples attributed to each coarse sample: (41,).
 _ASSIGN = np.abs(np.arange(NUM_SAMPLES)[:, None] - COARSE_INDEX[None, :]).argmin(axis=1)
 _COARSE_WEIGHT = np.bincount(_ASSIGN, minlength=COARSE_INDEX.size) / NUM_SAMPLES
-_CHUNK = 16  # pairs per exact batch: (16, 200, 200) float64 = 5 MB, stays in cache
-
-
-def resample(
-    points: NDArray[np.floating], num: int = NUM_SAMPLES, closed: bool | NDArray[np.bool_] = False
-) -> NDArray[np.float64]:
-    """Resamples polylines to ``num`` points evenly spaced by arc length (vectorised).
-
-    points: (N, n, 2) with n >= 1; closed: bool or (N,) bool — a closed row is resampled along its
-    closed contour (num points at arc positions k * L / num), an open row from its first to its
-    last point inclusive. A row of zero length gives ``num`` copies of its first point.
-    Returns (N, num, 2) float64.
-    """
-    return resample_at(points, np.linspace(0.0, 1.0, num), np.arange(num) / num, closed)
-
-
-def resample_at(
-    points: NDArray[np.floating],
-    frac_open: NDArray[np.float64],
-    frac_closed: NDArray[np.float64],
-    closed: bool | NDArray[np.bool_] = False,
-) -> NDArray[np.float64]:
-    """Points at arc-length fractions (frac_open (m,) for open rows, frac_closed (m,) for closed
-    rows, of the closed contour's length) of polylines (N, n, 2) -> (N, m, 2) float64."""
-    pts = np.asarray(points, dtype=np.float64)
-    if pts.ndim != 3 or pts.shape[-1] != 2 or pts.shape[1] < 1:
-        raise ValueError(f"points must have shape (N, n, 2) with n >= 1, got {pts.shape}")
-    closed_rows = np.broadcast_to(np.asarray(closed, dtype=bool), (pts.shape[0],))
-    out = np.empty((pts.shape[0], frac_open.shape[0], 2))
-    step = 2048  # rows per chunk: temporaries stay in cache
-    for s0 in range(0, pts.shape[0], step):
-        out[s0 : s0 + step] = _resample_chunk(
-            pts[s0 : s0 + step], frac_open, frac_closed, closed_rows[s0 : s0 + step]
-        )
-    return out
-
-
-def _resample_chunk(
-    pts: NDArray[np.float64],
-    frac_open: NDArray[np.float64],
-    frac_closed: NDArray[np.float64],
-    closed_rows: NDArray[np.bool_],
-) -> NDArray[np.float64]:
-    n_rows, n = pts.shape[:2]
-    num = frac_open.shape[0]
-    # Closing point: the first point for closed rows, a zero-length repeat of the last otherwise.
-    tail = np.where(closed_rows[:, None], pts[:, 0], pts[:, -1])  # (N, 2)
-    ext = np.concatenate([pts, tail[:, None]], axis=1)  # (N, n + 1, 2)
-    seg = np.linalg.norm(np.diff(ext, axis=1), axis=-1)  # (N, n)
-    cum = np.concatenate([np.zeros((n_rows, 1)), np.cumsum(seg, axis=1)], axis=1)  # (N, n + 1)
-    length = cum[:, -1]  # (N,)
-    frac = np.where(closed_rows[:, None], frac_closed[None], frac_open[None])  # (N, num)
-    target = frac * length[:, None]  # (N, num)
-    # Segment of every target, by one searchsorted with each row shifted into its own interval.
-    shift = (np.arange(n_rows) * (length.max() + 1.0))[:, None]  # (N, 1)
-    pos = np.searchsorted((cum[:, 1:] + shift).ravel(), (target + shift).ravel(), side="right")
-    idx = np.minimum(pos.reshape(n_rows, num) - (np.arange(n_rows) * n)[:, None], n - 1)  # (N, num)
-    flat = idx + (np.arange(n_rows) * (n + 1))[:, None]  # (N, num) rows into ext
-    seg_len = seg.ravel()[flat - np.arange(n_rows)[:, None]]  # (N, num): seg has n per row
-    start = cum.ravel()[flat]  # (N, num)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        t = np.where(seg_len > 0, (target - start) / seg_len, 0.0)  # (N, num)
-    t = np.clip(t, 0.0, 1.0)[..., None]  # (N, num, 1)
-    ext_flat = ext.reshape(-1, 2)
-    p0 = ext_flat[flat]  # (N, num, 2)
-    p1 = ext_flat[flat + 1]  # (N, num, 2)
-    return p0 + t * (p1 - p0)  # (N, num, 2)
+_ROWS = 4096  # instances per resampling chunk: (4096, 200, 2) float64 = 13 MB
+#: Margin (metres) added to the pruning tests: the bounds stay conservative whatever the
+#: round-off of the sampling (pruning only decides which pairs get an exact distance).
+_PRUNE_SLACK = 1e-9
 
 
 # Arc-length offset (in sample spacings) of every fine sample from its coarse sample.
@@ -110,7 +59,8 @@ class Resampled:
     samples of index COARSE_INDEX; err_mean / err_max (N,): bounds of the mean / max distance of a
     fine sample to its attributed coarse sample (arc offset x spacing >= Euclidean); lo / hi (N, 2)
     bounding boxes of the raw vertices (they contain every sample). The 200-point samples are
-    made on demand (:meth:`fine_rows`, :attr:`fine`).
+    made on demand (:meth:`fine_rows`, :attr:`fine`) — unless ``sampled``: then ``points`` are
+    already the (N, 200, 2) samples (:meth:`from_samples`) and are used as they are.
     """
 
     points: NDArray[np.float64]
@@ -120,6 +70,7 @@ class Resampled:
     err_max: NDArray[np.float64]
     lo: NDArray[np.float64]
     hi: NDArray[np.float64]
+    sampled: bool = False
 
     def __len__(self) -> int:
         return int(self.points.shape[0])
@@ -131,9 +82,11 @@ class Resampled:
         if pts.ndim != 3 or pts.shape[-1] != 2 or pts.shape[1] < 1:
             raise ValueError(f"points must have shape (N, n, 2) with n >= 1, got {pts.shape}")
         closed_rows = np.broadcast_to(np.asarray(closed, dtype=bool), (pts.shape[0],)).copy()
-        frac_open = np.linspace(0.0, 1.0, NUM_SAMPLES)[COARSE_INDEX]  # (41,)
-        frac_closed = (np.arange(NUM_SAMPLES) / NUM_SAMPLES)[COARSE_INDEX]  # (41,)
-        coarse = resample_at(pts, frac_open, frac_closed, closed_rows)  # (N, 41, 2)
+        coarse = np.empty((pts.shape[0], COARSE_INDEX.size, 2))  # (N, 41, 2)
+        for s0 in range(0, pts.shape[0], _ROWS):  # the 200 samples of a chunk, then the subset
+            rows = slice(s0, s0 + _ROWS)
+            fine = resample_many(pts[rows], NUM_SAMPLES, closed_rows[rows])  # (r, 200, 2)
+            coarse[rows] = fine[:, COARSE_INDEX]
         ring_gap = np.linalg.norm(pts[:, 0] - pts[:, -1], axis=-1)  # (N,)
         length = np.linalg.norm(np.diff(pts, axis=1), axis=-1).sum(axis=1)  # (N,)
         length = length + np.where(closed_rows, ring_gap, 0.0)
@@ -146,84 +99,36 @@ class Resampled:
             pts, closed_rows, coarse, spacing * _OFFSET.mean(), spacing * _OFFSET.max(), lo, hi
         )
 
+    @staticmethod
+    def from_samples(samples: NDArray[np.floating]) -> Resampled:
+        """Instances already sampled to the protocol's points, used as they are (no second
+        resampling; GAP): samples (N, 200, 2). The coarse points are the samples of index
+        COARSE_INDEX and the error terms the exact distances of every sample to its coarse one."""
+        fine = np.asarray(samples, dtype=np.float64)
+        if fine.ndim != 3 or fine.shape[1:] != (NUM_SAMPLES, 2):
+            raise ValueError(f"samples must have shape (N, {NUM_SAMPLES}, 2), got {fine.shape}")
+        coarse = fine[:, COARSE_INDEX]  # (N, 41, 2)
+        err = np.linalg.norm(fine - coarse[:, _ASSIGN], axis=-1)  # (N, 200)
+        if fine.shape[0] == 0:
+            lo = hi = np.zeros((0, 2))
+            err_mean = err_max = np.zeros(0)
+        else:
+            lo, hi = fine.min(axis=1), fine.max(axis=1)  # (N, 2)
+            err_mean, err_max = err.mean(axis=1), err.max(axis=1)  # (N,)
+        return Resampled(
+            fine, np.zeros(fine.shape[0], dtype=bool), coarse, err_mean, err_max, lo, hi, True
+        )
+
     def fine_rows(self, rows: NDArray[np.int64]) -> NDArray[np.float64]:
         """The 200 protocol samples of the given rows -> (len(rows), 200, 2)."""
-        return resample(self.points[rows], NUM_SAMPLES, self.closed[rows])
+        if self.sampled:
+            return self.points[rows]
+        return resample_many(self.points[rows], NUM_SAMPLES, self.closed[rows])
 
     @property
     def fine(self) -> NDArray[np.float64]:
         """All rows' 200 protocol samples (N, 200, 2)."""
-        return resample(self.points, NUM_SAMPLES, self.closed)
-
-
-def _directed_min_sq(a: NDArray[np.float64], b: NDArray[np.float64]) -> tuple[NDArray, NDArray]:
-    """a (P, n, 2), b (P, m, 2) -> squared nearest distances a->b (P, n) and b->a (P, m)."""
-    centre = a.mean(axis=1, keepdims=True)  # (P, 1, 2): centring keeps the expansion accurate
-    a = a - centre
-    b = b - centre
-    d = np.matmul(a, b.transpose(0, 2, 1))  # (P, n, m)
-    d *= -2.0
-    d += (a * a).sum(-1)[:, :, None]
-    d += (b * b).sum(-1)[:, None, :]
-    return d.min(axis=2), d.min(axis=1)
-
-
-#: Backend of the exact stage: "numpy", "engine" (icmapper.geom.chamfer_matrix, Rust) or "auto"
-#: (the engine when it imports, else numpy). "auto" because the engine measured faster in the
-#: benchmark (python -m icmapper.eval.bench; BENCHMARKS.md). Both give the same values (1e-14).
-BACKEND = "auto"
-
-
-def chamfer_pairs(
-    a: NDArray[np.float64], b: NDArray[np.float64], backend: str | None = None
-) -> NDArray[np.float64]:
-    """Exact Chamfer distance of paired point sets: a (P, n, 2), b (P, m, 2) -> (P,) float64."""
-    backend = BACKEND if backend is None else backend
-    if backend == "auto":
-        backend = "engine" if _engine_available() else "numpy"
-    if backend == "engine":
-        return _chamfer_pairs_engine(a, b)
-    if backend != "numpy":
-        raise ValueError(f"unknown Chamfer backend {backend!r}; expected 'numpy' or 'engine'")
-    out = np.empty(a.shape[0])
-    for s in range(0, a.shape[0], _CHUNK):
-        ab, ba = _directed_min_sq(a[s : s + _CHUNK], b[s : s + _CHUNK])
-        out[s : s + _CHUNK] = 0.5 * (
-            np.sqrt(np.maximum(ab, 0.0)).mean(axis=1) + np.sqrt(np.maximum(ba, 0.0)).mean(axis=1)
-        )
-    return out
-
-
-@functools.lru_cache(maxsize=1)
-def _engine_available() -> bool:
-    try:
-        from icmapper.geom import chamfer_matrix as engine_matrix
-
-        engine_matrix(np.zeros((1, 2, 2)), np.ones((1, 2, 2)))
-    except Exception:  # extension missing, or built without this function
-        return False
-    return True
-
-
-def _chamfer_pairs_engine(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
-    """chamfer_pairs through the Rust engine, one (1, B) call per pair (a, b as above)."""
-    from icmapper.geom import chamfer_matrix as engine_matrix
-
-    out = np.empty(a.shape[0])
-    for p in range(a.shape[0]):
-        out[p] = engine_matrix(a[p : p + 1], b[p : p + 1])[0, 0]
-    return out
-
-
-def chamfer_matrix(a: NDArray[np.floating], b: NDArray[np.floating]) -> NDArray[np.float64]:
-    """Dense exact Chamfer matrix of point sets a (A, n, 2) and b (B, m, 2) -> (A, B).
-
-    The points are used as given (resample first for the protocol). Reference implementation.
-    """
-    a = np.asarray(a, dtype=np.float64)
-    b = np.asarray(b, dtype=np.float64)
-    ia, ib = np.meshgrid(np.arange(len(a)), np.arange(len(b)), indexing="ij")
-    return chamfer_pairs(a[ia.ravel()], b[ib.ravel()]).reshape(len(a), len(b))
+        return self.fine_rows(np.arange(len(self)))
 
 
 def chamfer_lower_bound(
@@ -240,7 +145,7 @@ def chamfer_lower_bound(
     step = 256
     for s in range(0, ia.shape[0], step):
         ja, jb = ia[s : s + step], ib[s : s + step]
-        ab, ba = _directed_min_sq(a.coarse[ja], b.coarse[jb])  # (p, 41), (p, 41)
+        ab, ba = paired_nearest_sq(a.coarse[ja], b.coarse[jb])  # (p, 41), (p, 41)
         mab = np.sqrt(np.maximum(ab, 0.0)) @ _COARSE_WEIGHT  # (p,)
         mba = np.sqrt(np.maximum(ba, 0.0)) @ _COARSE_WEIGHT  # (p,)
         slack = a.err_mean[ja] + b.err_max[jb] + b.err_mean[jb] + a.err_max[ja]  # (p,)
@@ -277,17 +182,19 @@ def sparse_chamfer(
 ) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.float64]]:
     """Exact Chamfer distances of all same-key pairs whose distance is <= max_dist.
 
-    a, b: prepared instances; key_a (A,), key_b (B,) int64 group keys (frame and class).
+    a, b: prepared instances; key_a (A,), key_b (B,) int64 group keys (frame and class);
+    backend: of the exact stage (``geom.chamfer_pairs``; None: the engine).
     Returns ia (P,), ib (P,), dist (P,) for exactly the pairs with chamfer <= max_dist, sorted by
     ia then ib. Pairs left out provably have chamfer > max_dist.
     """
     ia, ib = group_pairs(np.asarray(key_a), np.asarray(key_b))
     # 1. Bounding-box distance <= set distance <= chamfer.
     gap = np.maximum(np.maximum(a.lo[ia] - b.hi[ib], b.lo[ib] - a.hi[ia]), 0.0)  # (P, 2)
-    keep = np.einsum("pi,pi->p", gap, gap) <= max_dist * max_dist
+    reach = max_dist + _PRUNE_SLACK
+    keep = np.einsum("pi,pi->p", gap, gap) <= reach * reach
     ia, ib = ia[keep], ib[keep]
     # 2. Coarse lower bound.
-    keep = chamfer_lower_bound(a, ia, b, ib) <= max_dist
+    keep = chamfer_lower_bound(a, ia, b, ib) <= reach
     ia, ib = ia[keep], ib[keep]
     # 3. Exact distances of the survivors (samples made for the rows involved only).
     ua, inv_a = np.unique(ia, return_inverse=True)
@@ -297,6 +204,6 @@ def sparse_chamfer(
     step = 4096  # pairs per gather: bounded memory
     for s0 in range(0, ia.shape[0], step):
         sl = slice(s0, s0 + step)
-        dist[sl] = chamfer_pairs(fa[inv_a[sl]], fb[inv_b[sl]], backend)
+        dist[sl] = chamfer_pairs(fa[inv_a[sl]], fb[inv_b[sl]], backend or "engine")
     keep = dist <= max_dist
     return ia[keep], ib[keep], dist[keep]

@@ -42,8 +42,11 @@ class Matching:
     nearest_dist: NDArray[np.float64]
 
 
-def prepare(inst: Instances) -> Resampled:
-    """Resamples a table's instances to the protocol's 200 points (crossings closed)."""
+def prepare(inst: Instances, sampled: bool = False) -> Resampled:
+    """Resamples a table's instances to the protocol's 200 points (crossings closed); with
+    ``sampled`` the table's points are those samples already (N, 200, 2) and are used as given."""
+    if sampled:
+        return Resampled.from_samples(inst.points)
     return Resampled.from_points(inst.points, inst.classes == 0)
 
 
@@ -53,12 +56,14 @@ def match(
     max_dist: float,
     block_rows: int = 20_000,
     backend: str | None = None,
+    sampled: bool = False,
 ) -> Matching:
     """Chamfer pairs (<= max_dist) and nearest ground truth of every prediction.
 
     pred, gt: tables in the same frames (same seq/frame numbering), points in the same frame.
     Works through blocks of whole sequences of about ``block_rows`` predictions, so memory stays
-    bounded (the 200-point samples of a block only).
+    bounded (the 200-point samples of a block only). ``sampled``: both tables hold the protocol's
+    200 samples already (:func:`prepare`); ``backend``: of the exact Chamfer stage.
     """
     num_frames = int(max(pred.frame.max(initial=0), gt.frame.max(initial=0))) + 1
     kp, kg = pred.key(num_frames), gt.key(num_frames)
@@ -78,7 +83,12 @@ def match(
         rows_p, rows_g = p_order[p_cut[i] : p_end], g_order[g_cut[i] : g_end]
         sub_p, sub_g = pred.select(rows_p), gt.select(rows_g)
         ip, ig, dist = sparse_chamfer(
-            prepare(sub_p), kp[rows_p], prepare(sub_g), kg[rows_g], max_dist, backend
+            prepare(sub_p, sampled),
+            kp[rows_p],
+            prepare(sub_g, sampled),
+            kg[rows_g],
+            max_dist,
+            backend,
         )
         parts_p.append(rows_p[ip]), parts_g.append(rows_g[ig]), parts_d.append(dist)
         i = j

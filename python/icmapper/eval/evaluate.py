@@ -12,6 +12,7 @@ from collections.abc import Sequence as Seq
 from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from icmapper.eval.consistency import consistency_map
 from icmapper.eval.detection import THRESHOLDS, detection_ap, match
@@ -24,38 +25,64 @@ RESULT_FORMAT = "icmapper-eval"
 RESULT_VERSION = 1
 
 
+def _frame_points(points: Any, k: int, where: str) -> NDArray[np.float64] | None:
+    """A frame's points as (k, n, 2) float64, or None for a frame without instances (k = 0)."""
+    pts = np.asarray(points, dtype=np.float64)
+    if k == 0:
+        if pts.size:
+            raise ValueError(f"{where}: no instances but points of shape {pts.shape}")
+        return None
+    if pts.size == 0 or pts.size % (2 * k) or (pts.ndim == 3 and pts.shape[0] != k):
+        raise ValueError(f"{where}: {k} instances but points of shape {pts.shape}")
+    return pts.reshape(k, -1, 2)
+
+
+def _table(rows: list[tuple[int, int, Any, Any, Any, Any]], what: str) -> Instances:
+    """Rows (seq, frame, classes (k,), ids (k,), scores (k,), points) -> one table; frames
+    without instances give no rows."""
+    parts: list[Instances] = []
+    n_points: int | None = None
+    for s, t, classes, ids, scores, points in rows:
+        k = int(np.asarray(ids).shape[0])
+        pts = _frame_points(points, k, f"{what} of sequence {s}, frame {t}")
+        if pts is None:
+            continue
+        if n_points is not None and pts.shape[1] != n_points:
+            raise ValueError(
+                f"{what} of sequence {s}, frame {t}: {pts.shape[1]} points per instance, "
+                f"earlier frames have {n_points}"
+            )
+        n_points = pts.shape[1]
+        parts.append(
+            Instances(
+                np.full(k, s, dtype=np.int64),
+                np.full(k, t, dtype=np.int64),
+                np.asarray(classes, dtype=np.int64).reshape(k),
+                np.asarray(ids, dtype=np.int64).reshape(k),
+                np.asarray(scores, dtype=np.float64).reshape(k),
+                pts,
+            )
+        )
+    return Instances.concat(parts)
+
+
 def _pred_table(predictions_per_seq: Seq[Seq[FramePredictions]]) -> Instances:
-    seq, frame, cls, ids, scores, pts = [], [], [], [], [], []
-    for s, frames in enumerate(predictions_per_seq):
-        for t, fp in enumerate(frames):
-            k = len(fp)
-            seq.append(np.full(k, s, dtype=np.int64))
-            frame.append(np.full(k, t, dtype=np.int64))
-            cls.append(np.asarray(fp.classes, dtype=np.int64))
-            ids.append(np.asarray(fp.track_ids, dtype=np.int64))
-            scores.append(np.asarray(fp.scores, dtype=np.float64))
-            pts.append(np.asarray(fp.points, dtype=np.float64).reshape(k, -1, 2))
-    if not seq:
-        return Instances.empty()
-    return Instances(*(np.concatenate(x) for x in (seq, frame, cls, ids, scores, pts)))
+    rows = [
+        (s, t, fp.classes, fp.track_ids, fp.scores, fp.points)
+        for s, frames in enumerate(predictions_per_seq)
+        for t, fp in enumerate(frames)
+    ]
+    return _table(rows, "predictions")
 
 
 def _gt_table(gt_per_seq: Seq[Seq[Any]]) -> Instances:
     """gt_per_seq[s][t]: a FrameGT-like object (ids (k,), classes (k,), points (k, n, 2))."""
-    seq, frame, cls, ids, pts = [], [], [], [], []
-    for s, frames in enumerate(gt_per_seq):
-        for t, g in enumerate(frames):
-            k = int(np.asarray(g.ids).shape[0])
-            seq.append(np.full(k, s, dtype=np.int64))
-            frame.append(np.full(k, t, dtype=np.int64))
-            cls.append(np.asarray(g.classes, dtype=np.int64))
-            ids.append(np.asarray(g.ids, dtype=np.int64))
-            pts.append(np.asarray(g.points, dtype=np.float64).reshape(k, -1, 2))
-    if not seq:
-        return Instances.empty()
-    n = sum(x.shape[0] for x in seq)
-    return Instances(*(np.concatenate(x) for x in (seq, frame, cls, ids)), np.ones(n),
-                     np.concatenate(pts))  # fmt: skip
+    rows = [
+        (s, t, g.classes, g.ids, np.ones(np.asarray(g.ids).shape[0]), g.points)
+        for s, frames in enumerate(gt_per_seq)
+        for t, g in enumerate(frames)
+    ]
+    return _table(rows, "ground truth")
 
 
 def _as_global(items: Seq[Any], scored: bool) -> list[tuple]:

@@ -7,9 +7,13 @@ deterministically (``cap`` evenly strided indices). CD = (mean nearest distance 
 nearest distance GT->pred) / 2 (metres, lower is better). A class empty on both sides is NaN (left
 out of mCD); empty on one side only is inf. mCD = mean over classes.
 
-GAP (GlobalMapNet): Chamfer AP over global instances — the detection protocol (200-point
-resampling, nearest-GT greedy matching, VOC area AP) with each sequence's global map as one
-"frame"; an instance's score is its observation count (ties in map order).
+GAP (GlobalMapNet): Chamfer AP over global instances — the detection protocol (nearest-GT greedy
+matching, VOC area AP) with each sequence's global map as one "frame"; an instance's score is its
+observation count (ties in map order). Sampling as GlobalMapNet's ``interp_fixed_num``
+(``plugin/datasets/evaluation/scene_eval.py``): the raw coordinates of every instance, a closed
+crossing as its ring with the first point repeated at the end (GlobalMapNet stores polygons as
+closed lines), are resampled ONCE to 200 points at ``linspace(0, length, 200)``
+(:func:`gap_samples`), and the Chamfer distance is taken on those samples as they are.
 """
 
 from __future__ import annotations
@@ -19,11 +23,11 @@ from collections.abc import Sequence as Seq
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.spatial import cKDTree
 
-from icmapper.eval.chamfer import NUM_SAMPLES, resample
-from icmapper.eval.detection import CLASS_NAMES, detection_ap, mean_ignore_nan
+from icmapper.eval.chamfer import NUM_SAMPLES
+from icmapper.eval.detection import CLASS_NAMES, detection_ap, match, mean_ignore_nan
 from icmapper.eval.instances import Instances
+from icmapper.geom import cloud_chamfer, resample_many
 
 #: Dense sampling step (metres) and per-class point cap of the CD metric.
 CD_STEP = 0.5
@@ -37,7 +41,7 @@ def dense_sample(points: NDArray[np.floating], closed: bool, step: float = CD_ST
     ring = np.vstack([pts, pts[:1]]) if closed else pts
     length = float(np.linalg.norm(np.diff(ring, axis=0), axis=1).sum())
     m = int(np.ceil(length / step)) + (0 if closed else 1)
-    return resample(pts[None], max(m, 1), closed)[0]
+    return resample_many(pts[None], max(m, 1), closed)[0]
 
 
 def _class_cloud(
@@ -52,15 +56,14 @@ def _class_cloud(
     return cloud
 
 
-def cloud_chamfer(a: NDArray[np.float64], b: NDArray[np.float64]) -> float:
-    """(mean nearest a->b + mean nearest b->a) / 2 of point clouds (n, 2), (m, 2)."""
+def class_cd(a: NDArray[np.float64], b: NDArray[np.float64]) -> float:
+    """CD of one class: ``geom.cloud_chamfer`` of the pooled samples (n, 2), (m, 2); NaN when
+    both are empty, inf when one is."""
     if a.shape[0] == 0 and b.shape[0] == 0:
         return float("nan")
     if a.shape[0] == 0 or b.shape[0] == 0:
         return float("inf")
-    dab, _ = cKDTree(b).query(a)
-    dba, _ = cKDTree(a).query(b)
-    return 0.5 * (float(dab.mean()) + float(dba.mean()))
+    return cloud_chamfer(a, b)
 
 
 def map_cd(
@@ -71,16 +74,25 @@ def map_cd(
 ) -> dict[str, float]:
     """CD per class between one predicted and one GT global map: (cls, points (n, 2), closed)."""
     return {
-        name: cloud_chamfer(_class_cloud(pred, c, step, cap), _class_cloud(gt, c, step, cap))
+        name: class_cd(_class_cloud(pred, c, step, cap), _class_cloud(gt, c, step, cap))
         for c, name in enumerate(CLASS_NAMES)
     }
 
 
+def gap_samples(points: NDArray[np.floating], closed: bool) -> NDArray[np.float64]:
+    """GlobalMapNet's sampling of a global instance for GAP: (n, 2) -> (200, 2) float64, the
+    coordinates as one line (closed: the first point appended) at 200 arc positions
+    ``linspace(0, length, 200)``, both ends included."""
+    pts = np.asarray(points, dtype=np.float64)  # (n, 2)
+    line = np.vstack([pts, pts[:1]]) if closed else pts  # (n or n + 1, 2)
+    return resample_many(line[None], NUM_SAMPLES, False)[0]  # (200, 2)
+
+
 def _table(seq_instances: Seq[Seq[tuple[int, NDArray, bool, float]]]) -> Instances:
+    """Global instances of every sequence (one frame each) with their GAP samples (N, 200, 2)."""
     rows = [(s, *inst) for s, insts in enumerate(seq_instances) for inst in insts]
     if not rows:
         return Instances.empty(NUM_SAMPLES)
-    pts = [resample(np.asarray(r[2])[None], NUM_SAMPLES, r[3])[0] for r in rows]
     n = len(rows)
     return Instances(
         np.array([r[0] for r in rows], dtype=np.int64),
@@ -88,7 +100,7 @@ def _table(seq_instances: Seq[Seq[tuple[int, NDArray, bool, float]]]) -> Instanc
         np.array([r[1] for r in rows], dtype=np.int64),
         np.arange(n, dtype=np.int64),
         np.array([r[4] for r in rows], dtype=np.float64),
-        np.stack(pts),
+        np.stack([gap_samples(r[2], r[3]) for r in rows]),  # (n, 200, 2)
     )
 
 
@@ -111,7 +123,9 @@ def global_metrics(
     per_seq = [map_cd([p[:3] for p in ps], gs, step, cap) for ps, gs in zip(pred, gt, strict=True)]
     cd = {name: mean_ignore_nan([r[name] for r in per_seq]) for name in CLASS_NAMES}
     gt_scored = [[(*g, 1.0) for g in gs] for gs in gt]
-    ap = detection_ap(_table(pred), _table(gt_scored), thresholds)
+    pred_t, gt_t = _table(pred), _table(gt_scored)
+    m = match(pred_t, gt_t, max(thresholds), sampled=True)  # the samples as they are
+    ap = detection_ap(pred_t, gt_t, thresholds, m)
     return {
         "CD": cd,
         "mCD": mean_ignore_nan(list(cd.values())),

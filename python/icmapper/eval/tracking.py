@@ -23,7 +23,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import linear_sum_assignment
 
-from icmapper.eval.detection import CLASS_NAMES, Matching, match
+from icmapper.eval.detection import CLASS_NAMES, Matching, match, mean_ignore_nan
 from icmapper.eval.instances import Instances
 
 #: Default matching gate (metres of Chamfer distance) per perception range: the largest AP
@@ -188,8 +188,5 @@ def tracking_metrics(
     accs = accumulate(sub, gt, m_sub, gate, num_seqs)
     per = {name: summarize(accs[c]) for c, name in enumerate(CLASS_NAMES)}
     valid = [per[n] for n in CLASS_NAMES if per[n]["num_objects"] > 0]
-    mean = {
-        k: float(np.nanmean([v[k] for v in valid])) if valid else float("nan")
-        for k in ("MOTA", "MOTP", "IDS")
-    }
+    mean = {k: mean_ignore_nan([v[k] for v in valid]) for k in ("MOTA", "MOTP", "IDS")}
     return {"gate": gate, "score_threshold": score_threshold, "per_class": per, "mean": mean}

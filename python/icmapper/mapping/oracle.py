@@ -20,6 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from icmapper import geom
 from icmapper.data.types import (
     NUM_INSTANCE_POINTS,
     Frame,
@@ -124,22 +125,11 @@ _PRESETS: dict[str, OracleNoise] = {
 }
 
 
-def _resample_open(points: NDArray[np.float64], n: int) -> NDArray[np.float64]:
-    """(m, 2) open polyline -> (n, 2) points evenly spaced by arc length (numpy)."""
-    seg = np.linalg.norm(np.diff(points, axis=0), axis=1)  # (m-1,)
-    s = np.concatenate([[0.0], np.cumsum(seg)])  # (m,)
-    if s[-1] <= 0:
-        return np.repeat(points[:1], n, axis=0)
-    t = np.linspace(0.0, s[-1], n)  # (n,)
-    return np.stack([np.interp(t, s, points[:, 0]), np.interp(t, s, points[:, 1])], axis=1)
-
-
 def _sub_range(points: NDArray[np.float64], a: float, b: float, n: int) -> NDArray[np.float64]:
-    """The part of an open polyline (m, 2) between arc-length fractions a < b, as (n, 2)."""
-    seg = np.linalg.norm(np.diff(points, axis=0), axis=1)
-    s = np.concatenate([[0.0], np.cumsum(seg)])  # (m,)
-    t = np.linspace(a * s[-1], b * s[-1], n)  # (n,)
-    return np.stack([np.interp(t, s, points[:, 0]), np.interp(t, s, points[:, 1])], axis=1)
+    """The part of an open polyline (m, 2) between arc-length fractions a < b, as (n, 2) points
+    evenly spaced by arc length."""
+    total = geom.arc_lengths(points)[-1]
+    return geom.points_at_lengths(points, np.linspace(a * total, b * total, n))  # (n, 2)
 
 
 def _false_instance(
@@ -154,11 +144,9 @@ def _false_instance(
         w, h = rng.uniform(2.0, 4.0), rng.uniform(5.0, 12.0)
         corners = np.array([[-w, -h], [w, -h], [w, h], [-w, h]]) / 2.0  # (4, 2)
         # Points evenly along the closed contour.
-        ring = np.concatenate([corners, corners[:1]])
-        seg = np.linalg.norm(np.diff(ring, axis=0), axis=1)
-        s = np.concatenate([[0.0], np.cumsum(seg)])
-        t = np.linspace(0.0, s[-1], n, endpoint=False)
-        local = np.stack([np.interp(t, s, ring[:, 0]), np.interp(t, s, ring[:, 1])], axis=1)
+        ring = np.concatenate([corners, corners[:1]])  # (5, 2)
+        total = geom.arc_lengths(ring)[-1]
+        local = geom.points_at_lengths(ring, np.linspace(0.0, total, n, endpoint=False))  # (n, 2)
     else:
         length = rng.uniform(5.0, 25.0)
         bend = rng.normal(0.0, 0.02)

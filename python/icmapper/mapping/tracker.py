@@ -21,6 +21,7 @@ from numpy.typing import NDArray
 from scipy.optimize import linear_sum_assignment
 
 from icmapper.data.types import ego_to_world, world_to_ego
+from icmapper.geom import point_to_segments, polyline_segments
 
 #: Default length scale (metres) of `positional_affinity`: exp(-chamfer / scale).
 DEFAULT_AFFINITY_SCALE = 1.0
@@ -43,34 +44,9 @@ class Track:
     hits: int = 1
 
 
-def chamfer_matrix_np(a: NDArray[np.floating], b: NDArray[np.floating]) -> NDArray[np.float64]:
-    """Pairwise Chamfer distance between point sets, the project's convention
-    ((mean a->b + mean b->a) / 2).
-
-    a (A, n, 2), b (B, m, 2) -> (A, B) float64. Plain numpy; meant for the small matrices of
-    per-frame association (memory A*B*n*m floats).
-    """
-    a = np.asarray(a, dtype=np.float64)
-    b = np.asarray(b, dtype=np.float64)
-    if a.ndim != 3 or a.shape[2] != 2 or b.ndim != 3 or b.shape[2] != 2:
-        raise ValueError(
-            f"chamfer_matrix_np: expected (A, n, 2) and (B, m, 2), got {a.shape}, {b.shape}"
-        )
-    if a.shape[0] == 0 or b.shape[0] == 0:
-        return np.zeros((a.shape[0], b.shape[0]), np.float64)
-    if a.shape[1] == 0 or b.shape[1] == 0:
-        raise ValueError("chamfer_matrix_np: point sets must not be empty")
-    diff = a[:, None, :, None, :] - b[None, :, None, :, :]  # (A, B, n, m, 2)
-    d = np.sqrt(np.einsum("abnmk,abnmk->abnm", diff, diff))  # (A, B, n, m)
-    return 0.5 * (d.min(axis=3).mean(axis=2) + d.min(axis=2).mean(axis=2))  # (A, B)
-
-
-def _segments(points: NDArray[np.float64], closed: NDArray[np.bool_]) -> NDArray[np.float64]:
-    """(B, m, 2) point sequences -> (B, m, 2, 2) segments (start, end); the closing segment of an
-    open polyline is degenerate (last point to itself)."""
-    nxt = np.roll(points, -1, axis=1)  # (B, m, 2)
-    nxt[~closed, -1] = points[~closed, -1]
-    return np.stack([points, nxt], axis=2)  # (B, m, 2, 2)
+#: The segments of point sequences; the name mapping/mapper.py imports (until it takes
+#: ``geom.polyline_segments`` itself).
+_segments = polyline_segments
 
 
 def polyline_chamfer_matrix(
@@ -97,36 +73,13 @@ def polyline_chamfer_matrix(
         )
     if a.shape[0] == 0 or b.shape[0] == 0:
         return np.zeros((a.shape[0], b.shape[0]), np.float64)
-    sa = _segments(a, np.asarray(a_closed, bool))  # (A, n, 2, 2)
-    sb = _segments(b, np.asarray(b_closed, bool))  # (B, m, 2, 2)
-    ab = _mean_point_to_segments(a, sb)  # (A, B)
-    ba = _mean_point_to_segments(b, sa)  # (B, A)
+    sa = polyline_segments(a, np.asarray(a_closed, bool))  # (A, n, 2, 2)
+    sb = polyline_segments(b, np.asarray(b_closed, bool))  # (B, m, 2, 2)
+    ab = point_to_segments(a, sb).mean(axis=2)  # (A, B)
+    ba = point_to_segments(b, sa).mean(axis=2)  # (B, A)
     if reduce == "min":
         return np.minimum(ab, ba.T)
     return 0.5 * (ab + ba.T)
-
-
-def _mean_point_to_segments(
-    p: NDArray[np.float64], seg: NDArray[np.float64]
-) -> NDArray[np.float64]:
-    """p (A, n, 2), seg (B, m, 2, 2) -> (A, B): mean over each p's points of the distance to the
-    nearest segment of each seg set."""
-    num_b, m = seg.shape[:2]
-    n = p.shape[1]
-    sx, sy = seg[None, :, None, :, 0, 0], seg[None, :, None, :, 0, 1]  # (1, B, 1, m)
-    dx = seg[None, :, None, :, 1, 0] - sx  # (1, B, 1, m)
-    dy = seg[None, :, None, :, 1, 1] - sy
-    dd = np.maximum(dx * dx + dy * dy, 1e-18)  # (1, B, 1, m)
-    out = np.empty((p.shape[0], num_b), np.float64)
-    rows = max(1, 2_000_000 // max(1, num_b * n * m))  # chunk of A: about 2M pairs at a time
-    for r0 in range(0, p.shape[0], rows):
-        px = p[r0 : r0 + rows, None, :, None, 0]  # (a, 1, n, 1)
-        py = p[r0 : r0 + rows, None, :, None, 1]
-        rx, ry = px - sx, py - sy  # (a, B, n, m)
-        t = np.clip((rx * dx + ry * dy) / dd, 0.0, 1.0)  # (a, B, n, m)
-        ox, oy = rx - t * dx, ry - t * dy  # (a, B, n, m)
-        out[r0 : r0 + rows] = np.sqrt((ox * ox + oy * oy).min(axis=3)).mean(axis=2)  # (a, B)
-    return out
 
 
 def positional_affinity(

@@ -1,10 +1,13 @@
 """Small planar-curve helpers shared by the synthetic city generator, the driver and the renderer:
-Bezier sampling, arc length, resampling and offset curves. Pure numpy, no randomness, no I/O."""
+Bezier sampling, sub-curves and offset curves (arc length and points at arc lengths are
+``icmapper.geom``'s, under the names the simulator uses). Numpy, no randomness, no I/O."""
 
 from __future__ import annotations
 
 import numpy as np
 from numpy.typing import NDArray
+
+from icmapper import geom
 
 
 def quadratic_bezier(p0: NDArray, p1: NDArray, p2: NDArray, n: int) -> NDArray[np.float64]:
@@ -22,16 +25,11 @@ def cubic_bezier(p0: NDArray, p1: NDArray, p2: NDArray, p3: NDArray, n: int) -> 
     return u**3 * p0 + 3 * u**2 * t * p1 + 3 * u * t**2 * p2 + t**3 * p3  # (n, 2)
 
 
-def arc_length(points: NDArray) -> NDArray[np.float64]:
-    """Cumulative arc length of an (n, 2) polyline. Returns (n,) starting at 0."""
-    seg = np.linalg.norm(np.diff(points, axis=0), axis=1)  # (n-1,)
-    return np.concatenate([[0.0], np.cumsum(seg)])
-
-
-def resample_by_length(points: NDArray, s_new: NDArray) -> NDArray[np.float64]:
-    """Points (m, 2) of the (n, 2) polyline at arc lengths s_new (m,), clamped to the ends."""
-    s = arc_length(points)
-    return np.stack([np.interp(s_new, s, points[:, 0]), np.interp(s_new, s, points[:, 1])], axis=1)
+#: Cumulative arc length (n,) of an (n, 2) polyline (``icmapper.geom.arc_lengths``).
+arc_length = geom.arc_lengths
+#: Points (m, 2) of an (n, 2) polyline at arc lengths (m,), clamped to the ends
+#: (``icmapper.geom.points_at_lengths``).
+resample_by_length = geom.points_at_lengths
 
 
 def sub_curve(points: NDArray, s0: float, s1: float, spacing: float = 1.0) -> NDArray[np.float64]:

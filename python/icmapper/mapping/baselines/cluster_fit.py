@@ -72,12 +72,13 @@ def dbscan(points: NDArray[np.floating], eps: float, min_samples: int) -> NDArra
 def densify(points: NDArray[np.floating], spacing: float, closed: bool) -> NDArray[np.float64]:
     """Points about `spacing` apart along a polyline (n, 2) (with its closing edge if closed),
     vertices kept -> (m, 2). Makes the clustering independent of how sparsely a detector samples."""
+    from icmapper.geom import arc_lengths, points_at_lengths
+
     p = np.asarray(points, dtype=np.float64)
     q = np.concatenate([p, p[:1]]) if closed else p
-    seg = np.linalg.norm(np.diff(q, axis=0), axis=1)  # (e,)
-    s = np.concatenate([[0.0], np.cumsum(seg)])  # (e + 1,)
+    s = arc_lengths(q)  # (e + 1,)
     t = np.union1d(np.arange(0.0, s[-1], spacing), s[:-1] if closed else s)  # (m,)
-    return np.stack([np.interp(t, s, q[:, 0]), np.interp(t, s, q[:, 1])], axis=1)
+    return points_at_lengths(q, t)  # (m, 2)
 
 
 def order_along_axis(points: NDArray[np.floating], spacing: float) -> NDArray[np.float64]:
