@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-from icmapper.mapping.tracker import _segments
+from icmapper.geom import point_to_segments, polyline_segments
 
 #: Share of a new track's points that must lie within ``reid_distance`` of a global instance for
 #: the track to take that instance's id.
@@ -56,8 +56,9 @@ def reidentify(
         if not cands:
             continue
         hist = hist_pts[[r for _, r in cands]].astype(np.float64)  # (c, S, 2)
-        segs = _segments(hist, np.full(len(cands), cls == 0))  # (c, S, 2, 2)
-        dist = point_to_segments(det_points[j].astype(np.float64), segs)  # (c, P)
+        segs = polyline_segments(hist, cls == 0)  # (c, S, 2, 2)
+        p = det_points[j][None].astype(np.float64)  # (1, P, 2)
+        dist = point_to_segments(p, segs)[0]  # (c, P)
         # share of the detection lying on the instance: a piece that slid along the instance or
         # grew at the range edge still overlaps it over most of its length
         overlap = (dist <= limit).mean(axis=1)  # (c,)
@@ -71,13 +72,3 @@ def reidentify(
             out.renamed[tid] = gid
             taken.add(gid)
     return out
-
-
-def point_to_segments(p: NDArray[np.float64], seg: NDArray[np.float64]) -> NDArray[np.float64]:
-    """p (n, 2), seg (c, S, 2, 2) -> (c, n): distance of every point to the nearest segment."""
-    a, b = seg[:, None, :, 0], seg[:, None, :, 1]  # (c, 1, S, 2)
-    ab = b - a  # (c, 1, S, 2)
-    ap = p[None, :, None, :] - a  # (c, n, S, 2)
-    t = np.clip((ap * ab).sum(-1) / np.maximum((ab * ab).sum(-1), 1e-18), 0.0, 1.0)  # (c, n, S)
-    off = ap - t[..., None] * ab  # (c, n, S, 2)
-    return np.sqrt((off * off).sum(-1)).min(axis=2)  # (c, n)

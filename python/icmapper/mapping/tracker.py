@@ -44,11 +44,6 @@ class Track:
     hits: int = 1
 
 
-#: The segments of point sequences; the name mapping/mapper.py imports (until it takes
-#: ``geom.polyline_segments`` itself).
-_segments = polyline_segments
-
-
 def polyline_chamfer_matrix(
     a: NDArray[np.floating],
     b: NDArray[np.floating],

@@ -18,7 +18,7 @@ and prints the ratio (values are checked to agree before timing):
 5. numpy-only forms (no engine equivalent), timed for reference: ``point_to_segments`` (tracker
    affinity) and ``paired_nearest_sq`` on the 41-point coarse sets (evaluation pruning bound).
 
-Run: ``.venv/bin/python benchmarks/bench_python_geometry.py [--rows 20000] [--pairs 2000]
+Run: ``.venv/bin/python -m benchmarks python-geometry [--rows 20000] [--pairs 2000]
 [--clouds 300 1000 3000 20000] [--repeat 3]``.
 Medians of ``--repeat`` runs; single-threaded numpy is not enforced (set OMP_NUM_THREADS=1 for
 stable numbers on a shared machine).
@@ -92,7 +92,9 @@ def _row(name: str, t_numpy: float, t_engine: float, numpy_label: str, engine_la
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(
+        prog="python -m benchmarks python-geometry", description=__doc__.splitlines()[0]
+    )
     ap.add_argument("--rows", type=int, default=20_000, help="instances in the resampling table")
     ap.add_argument("--pairs", type=int, default=2_000, help="200-point pairs, exact Chamfer")
     ap.add_argument(
