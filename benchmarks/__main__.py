@@ -24,6 +24,10 @@ BENCHMARKS: dict[str, tuple[str, str]] = {
         "training steps/s and per-module inference latency (small config)",
     ),
     "mapper": ("benchmarks.mapper", "per-frame latency of the online mapper by stage"),
+    "train-step": (
+        "benchmarks.train_step",
+        "training frames/s: the view transformer's former dense step vs its sparse step",
+    ),
     "python-geometry": (
         "benchmarks.python_geometry",
         "icmapper.geom's engine calls vs batched numpy forms (resample, Chamfer, point clouds)",

@@ -113,25 +113,54 @@ class ViewTransformer(nn.Module):
             raise ValueError(f"expected {self.num_cameras} cameras, got {ncam}")
         grid, valid = self.project(intrinsics, cam_to_ego, image_size)
         n, z = grid.shape[2], grid.shape[3]
-        sampled = F.grid_sample(
-            feats.reshape(b * ncam, c_img, fh, fw),
-            grid.reshape(b * ncam, n, z, 2).to(feats.dtype),
-            mode="bilinear",
-            padding_mode="zeros",
-            align_corners=False,
-        )  # (B*Ncam, C_img, N, Z)
-        sampled = sampled.reshape(b, ncam, c_img, n, z).permute(0, 3, 1, 4, 2)  # (B,N,Ncam,Z,Ci)
-        value = self.value(sampled)  # (B, N, Ncam, Z, C)
+        # The value projection is linear and bilinear sampling is linear with zero padding, so the
+        # image features are projected once per pixel (not once per sample), without the bias,
+        # which is added after sampling: the same values as projecting every sample.
+        vmap = F.conv2d(
+            feats.reshape(b * ncam, c_img, fh, fw), self.value.weight[:, :, None, None]
+        )  # (B*Ncam, C, h, w)
+        # Only the valid samples (pillar points in front of a camera and inside its image; a
+        # small share of all (camera, cell, height) triples) are gathered.
+        ib, ic, icell, iz = valid.nonzero(as_tuple=True)  # (V,) each
+        value = bilinear_gather(vmap, ib * ncam + ic, grid[ib, ic, icell, iz].to(vmap.dtype))
+        value = value + self.value.bias  # (V, C)
         q = self.query  # (N, C)
-        logits = self.query_logits(q).reshape(1, n, ncam, z) + self.feat_logits(value).squeeze(-1)
-        mask = valid.permute(0, 2, 1, 3)  # (B, N, Ncam, Z)
-        logits = logits.masked_fill(~mask, -1e4).reshape(b, n, ncam * z)  # (B, N, Ncam*Z)
-        weights = torch.softmax(logits.float(), dim=-1).to(value.dtype)
-        weights = weights * mask.reshape(b, n, -1).to(value.dtype)  # cells seen by no camera -> 0
-        agg = torch.einsum("bnk,bnkc->bnc", weights, value.reshape(b, n, ncam * z, -1))  # (B, N, C)
+        k = ic * z + iz  # (V,) column of the (camera, height) pair
+        logits = torch.full((b, n, ncam * z), -1e4, dtype=value.dtype, device=value.device)
+        qlog = self.query_logits(q)  # (N, Ncam*Z)
+        logits = logits.index_put(
+            (ib, icell, k), qlog[icell, k] + self.feat_logits(value).squeeze(-1)
+        )  # (B, N, Ncam*Z); invalid pairs stay -1e4
+        weights = torch.softmax(logits.float(), dim=-1).to(value.dtype)  # (B, N, Ncam*Z)
+        w = weights[ib, icell, k]  # (V,) invalid pairs weigh 0; cells seen by no camera get 0
+        agg = torch.zeros(b * n, value.shape[1], dtype=value.dtype, device=value.device)
+        agg = agg.index_add(0, ib * n + icell, w[:, None] * value).reshape(b, n, -1)  # (B, N, C)
         x = self.norm1(q[None] + self.proj(agg))  # (B, N, C)
         x = self.norm2(x + self.ffn(x))  # (B, N, C)
         return x.transpose(1, 2).reshape(b, -1, self.bev_x, self.bev_y)  # (B, C, X, Y)
+
+
+def bilinear_gather(maps: torch.Tensor, which: torch.Tensor, grid: torch.Tensor) -> torch.Tensor:
+    """Bilinear samples of feature maps at scattered points: ``grid_sample`` semantics
+    (``align_corners=False``, zero padding) for one point per row.
+
+    maps (M, C, h, w); which (V,) the map of each point; grid (V, 2) as (x, y) in [-1, 1] of the
+    map's width and height -> (V, C).
+    """
+    m, c, h, w = maps.shape
+    flat = maps.permute(0, 2, 3, 1).reshape(m * h * w, c)  # (M*h*w, C)
+    x = ((grid[:, 0] + 1) * w - 1) / 2  # (V,) pixel coordinates
+    y = ((grid[:, 1] + 1) * h - 1) / 2
+    x0, y0 = torch.floor(x), torch.floor(y)
+    fx, fy = x - x0, y - y0  # (V,)
+    out = flat.new_zeros(grid.shape[0], c)  # (V, C)
+    for dx, dy, wt in ((0, 0, (1 - fx) * (1 - fy)), (1, 0, fx * (1 - fy)),
+                       (0, 1, (1 - fx) * fy), (1, 1, fx * fy)):  # fmt: skip
+        xi, yi = (x0 + dx).long(), (y0 + dy).long()  # (V,)
+        inside = (xi >= 0) & (xi < w) & (yi >= 0) & (yi < h)  # (V,) zero padding outside
+        idx = which * (h * w) + yi.clamp(0, h - 1) * w + xi.clamp(0, w - 1)  # (V,)
+        out = out + (wt * inside)[:, None] * flat[idx]  # (V, C)
+    return out
 
 
 def warp_bev(
