@@ -47,3 +47,62 @@ def test_train_step_benchmark_runs(capsys) -> None:
     assert main(["--steps", "1", "--rounds", "1"]) == 0
     out = capsys.readouterr().out
     assert "speed-up" in out and float(out.split("difference ")[1].split(")")[0]) < 1e-3
+
+
+def test_model_camera_math_lands_on_painted_markings() -> None:
+    """Issue 13's geometry diagnostic: ground-truth dividers projected with the view transformer's
+    own math (``ViewTransformer.project`` + grid_sample's pixel convention) onto rendered images
+    read paint; the same points moved 1 m sideways read asphalt."""
+    import dataclasses
+
+    import numpy as np
+    from icmapper.data import MapClass, xy_yaw_to_pose
+    from icmapper.data.sim import Renderer, generate_city, nuscenes_rig
+    from icmapper.data.sim.geometry import arc_length, resample_by_length
+
+    world = generate_city(10_011)  # the city of the renderer's own paint test
+    quiet = dataclasses.replace(world, lanes={})  # no driving vehicles
+    size = (128, 352)
+    rig = nuscenes_rig(size)
+    renderer = Renderer(quiet, rig, seed=2)
+    vt = ViewTransformer(3, 8, 4, 2, 30.0, 15.0, (0.0,), rig.num_cameras)
+    intr = torch.as_tensor(rig.intrinsics, dtype=torch.float32)[None]  # (1, Ncam, 3, 3)
+    c2e = torch.as_tensor(rig.cam_to_ego, dtype=torch.float32)[None]  # (1, Ncam, 4, 4)
+    dividers = [
+        m
+        for m in world.instances
+        if m.cls == MapClass.DIVIDER
+        and m.style.startswith(("solid", "double"))
+        and arc_length(m.points)[-1] > 30.0
+    ]
+    checked = 0
+    for m in dividers[:4]:
+        p0, p1 = resample_by_length(m.points, np.array([2.0, 3.0]))
+        t = (p1 - p0) / np.linalg.norm(p1 - p0)
+        nrm = np.array([-t[1], t[0]])
+        ego_xy = p0 - 1.6 * nrm  # in the lane right of the divider, facing along it
+        pose = xy_yaw_to_pose(*ego_xy, float(np.arctan2(t[1], t[0])))
+        img = torch.as_tensor(renderer.render(pose, frame_seed=0)).float().mean(1)  # (C, H, W)
+        along = resample_by_length(m.points, np.linspace(10.0, 20.0, 40))  # (40, 2) world
+        reads = []
+        for pts in (along, along - 1.0 * nrm):  # the divider, asphalt 1 m to its right
+            rel = pts - ego_xy
+            ego = np.stack([rel @ t, rel @ nrm], axis=1)  # (40, 2) ego frame
+            pillars = torch.zeros(len(ego), 1, 4)  # (N, Z=1, 4) homogeneous ground points
+            pillars[:, 0, :2] = torch.as_tensor(ego, dtype=torch.float32)
+            pillars[:, 0, 3] = 1.0
+            vt.pillars = pillars
+            grid, valid = vt.project(intr, c2e, size)  # (1, Ncam, N, 1, 2), (1, Ncam, N, 1)
+            # brightest of +-2 pixel columns: double lines leave a gap on their centreline
+            shifts = torch.tensor([[2.0 * du / size[1], 0.0] for du in range(-2, 3)])  # (5, 2)
+            sampled = torch.stack(
+                [F.grid_sample(img[:, None], grid[0] + d, align_corners=False) for d in shifts]
+            ).amax(0)  # (Ncam, 1, N, 1) grey values at the projections
+            v = sampled[:, 0, :, 0][valid[0, :, :, 0]]  # (k,) valid projections only
+            reads.append(v)
+        paint, asphalt = reads
+        if len(paint) < 10 or len(asphalt) < 10:
+            continue
+        assert float(paint.median()) > float(asphalt.median()) + 25.0
+        checked += 1
+    assert checked >= 1
