@@ -96,6 +96,8 @@ def _xy(points: object, where: str) -> NDArray[np.float64]:
         arr = np.array([[p["x"], p["y"]] for p in points], dtype=np.float64)  # type: ignore[union-attr]
     except (TypeError, KeyError) as e:
         raise DataError(f"{where}: expected a list of {{x, y, z}} points ({e!r})") from None
+    except ValueError as e:
+        raise DataError(f"{where}: a coordinate is not a number ({e})") from None
     if arr.ndim != 2 or len(arr) < 2 or not np.all(np.isfinite(arr)):
         raise DataError(f"{where}: needs at least 2 finite points")
     return arr

@@ -179,13 +179,19 @@ def connect_lines(lines: list[Line]) -> list[Line]:
     return out
 
 
+#: Holes of a drivable-area union smaller than this (m^2) are slivers between polygons that do
+#: not quite abut, not islands: they give no boundary.
+MIN_HOLE_AREA = 1.0
+
+
 def union_contours(polygons: list[NDArray[np.float64]]) -> list[NDArray[np.float64]]:
     """Contours of the union of polygons, each as an OPEN polyline that closes on itself
-    ((m + 1, 2): first point repeated at the end), largest area first.
+    ((m + 1, 2): first point repeated at the end): the outer rings (largest area first), then
+    the holes of the union (islands fully enclosed by the union: medians, blocks; largest first,
+    slivers below `MIN_HOLE_AREA` dropped), as StreamMapNet takes exteriors and interiors.
 
-    Deviation from StreamMapNet (documented in docs/data.md): `icmapper.geom.polygon_union`
-    returns outer rings only, so holes of the union (islands fully enclosed by road) are not
-    turned into boundaries.
+    Outer rings come from `icmapper.geom.polygon_union` (the engine); holes from shapely's union,
+    since the engine's union returns outer rings only.
     """
     from icmapper import geom
 
@@ -197,7 +203,27 @@ def union_contours(polygons: list[NDArray[np.float64]]) -> list[NDArray[np.float
         ring = np.asarray(ring, dtype=np.float64)
         if len(ring) >= 3:
             out.append(np.vstack([ring, ring[:1]]))
-    return out
+    return out + union_holes(rings)
+
+
+def union_holes(rings: list[NDArray[np.float64]]) -> list[NDArray[np.float64]]:
+    """The holes of the union of (n, 2) rings as closed (m + 1, 2) polylines, largest first."""
+    import shapely
+
+    polys = [shapely.make_valid(shapely.Polygon(r)) for r in rings]
+    union = shapely.union_all(polys)
+    holes = []
+    for g in shapely.get_parts(union):
+        if not isinstance(g, shapely.Polygon):
+            continue
+        for interior in g.interiors:
+            hole = shapely.Polygon(interior)
+            if hole.area >= MIN_HOLE_AREA:
+                pts = dedup_points(np.asarray(interior.coords, dtype=np.float64)[:-1])
+                if len(pts) >= 3:
+                    holes.append((hole.area, np.vstack([pts, pts[:1]])))
+    holes.sort(key=lambda h: -h[0])
+    return [h for _, h in holes]
 
 
 def subsample_indices(timestamps: NDArray[np.float64], hz: float) -> NDArray[np.int64]:
