@@ -13,6 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from icmapper.data.errors import DataError
 from icmapper.data.types import CameraRig, WorldMap, pose_to_xy_yaw, xy_yaw_to_pose
 
 #: StreamMapNet's buffer for its overlap rules (metres, each line buffered by this much).
@@ -45,6 +46,44 @@ def se3(q: NDArray[np.float64], t: NDArray[np.float64]) -> NDArray[np.float64]:
     m[:3, :3] = quat_to_matrix(q)
     m[:3, 3] = np.asarray(t, dtype=np.float64)
     return m
+
+
+def interpolate_poses(
+    stamps_ns: NDArray[np.int64],
+    quats: NDArray[np.float64],
+    trans: NDArray[np.float64],
+    query_ns: NDArray[np.int64],
+    where: str = "poses",
+) -> NDArray[np.float64]:
+    """Poses at `query_ns` (Q,) from sorted samples (stamps_ns (N,), quats (N, 4) w x y z,
+    trans (N, 3)) -> (Q, 4, 4): translation linear in time, rotation by slerp; a query equal to a
+    sample gives that sample exactly. A query outside [first, last] raises DataError naming
+    `where`."""
+    q = np.asarray(query_ns, dtype=np.int64)
+    if len(q) and (q.min() < stamps_ns[0] or q.max() > stamps_ns[-1]):
+        raise DataError(
+            f"{where}: timestamp {int(q.min() if q.min() < stamps_ns[0] else q.max())} ns is "
+            f"outside the poses' time range [{int(stamps_ns[0])}, {int(stamps_ns[-1])}]"
+        )
+    j = np.clip(np.searchsorted(stamps_ns, q, side="right") - 1, 0, len(stamps_ns) - 1)  # (Q,)
+    out = np.empty((len(q), 4, 4))
+    for k, (t, i) in enumerate(zip(q.tolist(), j.tolist(), strict=True)):
+        if stamps_ns[i] == t or i + 1 >= len(stamps_ns):
+            out[k] = se3(quats[i], trans[i])
+            continue
+        a = (t - int(stamps_ns[i])) / float(int(stamps_ns[i + 1]) - int(stamps_ns[i]))
+        q0 = quats[i] / np.linalg.norm(quats[i])
+        q1 = quats[i + 1] / np.linalg.norm(quats[i + 1])
+        dot = float(q0 @ q1)
+        if dot < 0.0:
+            q1, dot = -q1, -dot
+        if dot > 0.9995:
+            qi = q0 + a * (q1 - q0)
+        else:
+            th = np.arccos(dot)
+            qi = (np.sin((1 - a) * th) * q0 + np.sin(a * th) * q1) / np.sin(th)
+        out[k] = se3(qi, (1 - a) * trans[i] + a * trans[i + 1])
+    return out
 
 
 def planar(pose: NDArray[np.float64]) -> NDArray[np.float64]:

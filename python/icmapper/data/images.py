@@ -31,8 +31,21 @@ from numpy.typing import NDArray
 
 from icmapper.data.errors import DataError
 
+#: Accepted values of the ``images`` option of the real-data readers.
+IMAGE_MODES = ("auto", "real", "render")
+
 _SOI = b"\xff\xd8"
 _EOI = b"\xff\xd9"
+
+
+def resolve_images(mode: str, has_images: bool, where: Path) -> bool:
+    """True when a reader should load real images: mode "real" (DataError when the data has
+    none), "auto" (when it has them) or "render" (never)."""
+    if mode not in IMAGE_MODES:
+        raise ValueError(f"images must be one of {IMAGE_MODES}, got {mode!r}")
+    if mode == "real" and not has_images:
+        raise DataError(f"images=real asked but {where} holds no camera images")
+    return mode == "real" or (mode == "auto" and has_images)
 
 
 def fit_size(native_hw: tuple[int, int], size: tuple[int, int]) -> tuple[int, int]:

@@ -38,7 +38,7 @@ from numpy.typing import NDArray
 
 from icmapper.data.errors import DataError
 from icmapper.data.extract import LazyRenderer, dedup_points, planar, se3, union_contours
-from icmapper.data.images import RealImages, fit_intrinsics
+from icmapper.data.images import RealImages, fit_intrinsics, resolve_images
 from icmapper.data.types import CameraRig, MapClass, MapInstance, Sequence, WorldMap
 
 TABLES = ("scene", "sample", "sample_data", "ego_pose", "calibrated_sensor", "sensor", "log")
@@ -53,8 +53,6 @@ NUSCENES_CAMERAS: tuple[str, ...] = (
 )
 POSE_CHANNELS = ("LIDAR_TOP", "CAM_FRONT")
 NATIVE_IMAGE_SIZE = (900, 1600)
-#: Accepted values of the ``images`` option of the real-data readers.
-IMAGE_MODES = ("auto", "real", "render")
 #: Map elements within this distance (m, bounding boxes) of a scene's poses form its world.
 WORLD_MARGIN = 100.0
 ID_CLASS_OFFSET = 10**10
@@ -195,16 +193,6 @@ def _scene_world(layers: _MapLayers, name: str, poses: NDArray[np.float64]) -> W
             MapInstance(2 * ID_CLASS_OFFSET + k, MapClass.BOUNDARY, contour, False, "curb")
         )
     return WorldMap(name, instances, drivable, {})
-
-
-def resolve_images(mode: str, has_images: bool, where: Path) -> bool:
-    """True when a reader should load real images: mode "real" (DataError when the data has
-    none), "auto" (when it has them) or "render" (never)."""
-    if mode not in IMAGE_MODES:
-        raise ValueError(f"images must be one of {IMAGE_MODES}, got {mode!r}")
-    if mode == "real" and not has_images:
-        raise DataError(f"images=real asked but {where} holds no camera images")
-    return mode == "real" or (mode == "auto" and has_images)
 
 
 def load_nuscenes(
