@@ -5,7 +5,9 @@ and errors list the registry.
 
     sim:val            4 synthetic validation drives (cities of sim.CITY_SEEDS["val"])
     sim:<split>:N      N synthetic drives of split train / val / test
-    av2:PATH           the drive of an Argoverse 2 log, or of every log in a folder of logs
+    av2:PATH[:split]   the drive of an Argoverse 2 log, or of every log in a folder of logs (a
+                       split keeps the logs named in a split file: `split_file=` or
+                       <PATH>/splits.json)
     av2-drives:PATH:N  N synthetic drives along the lane graph of each log under PATH
     nuscenes:PATH[:split]
                        the scenes of a nuScenes dataroot (version: v1.0-trainval if present, else
@@ -185,16 +187,44 @@ def _open_sim(spec: str, rest: str, o: SourceOptions) -> list[Sequence]:
     return list(sim.sim_sequences(parts[0], n, seed=o.seed, image_size=o.image_size))
 
 
+def _split_arg(spec: str, rest: str, o: SourceOptions) -> tuple[Path, str | None, Path | None]:
+    """PATH[:split] -> (path, split, split file): a split needs `split_file` or PATH/splits.json."""
+    path, split = rest, None
+    if not Path(rest).is_dir() and ":" in rest:
+        path, split = rest.rsplit(":", 1)
+    root = Path(path)
+    if not root.is_dir():
+        raise ValueError(f"bad source spec {spec!r}: {root} is not a directory")
+    split_file = Path(o.split_file) if o.split_file is not None else None
+    if split is not None and split_file is None:
+        split_file = root / "splits.json"
+        if not split_file.is_file():
+            raise ValueError(
+                f"source {spec!r} names split {split!r} but no split file was given "
+                f"(split_file=...) and {split_file} does not exist"
+            )
+    return root, split, split_file if split is not None else None
+
+
 def _open_av2(spec: str, rest: str, o: SourceOptions) -> list[Sequence]:
     from icmapper.data import av2
+    from icmapper.data.errors import DataError
+    from icmapper.data.nuscenes import read_split
 
     if not rest:
         raise ValueError(f"bad source spec {spec!r}: no path")
+    root, split, split_file = _split_arg(spec, rest, o)
+    logs = av2.find_av2_logs(root)
+    if split is not None and split_file is not None:
+        wanted = set(read_split(split_file, split))
+        logs = [log for log in logs if log.name in wanted]
+        if not logs:
+            raise DataError(f"no log of split {split!r} ({split_file}) is in {root}")
     return [
         av2.load_av2_sequence(
             log, image_size=o.image_size, render=o.render, seed=o.seed, images=o.images
         )
-        for log in av2.find_av2_logs(rest)
+        for log in logs
     ]
 
 
@@ -215,24 +245,11 @@ def _open_av2_drives(spec: str, rest: str, o: SourceOptions) -> list[Sequence]:
 def _open_nuscenes(spec: str, rest: str, o: SourceOptions) -> list[Sequence]:
     from icmapper.data import nuscenes
 
-    path, split = rest, None
-    if not Path(rest).is_dir() and ":" in rest:
-        path, split = rest.rsplit(":", 1)
-    root = Path(path)
-    if not root.is_dir():
-        raise ValueError(f"bad source spec {spec!r}: {root} is not a directory")
-    split_file = o.split_file
-    if split is not None and split_file is None:
-        split_file = root / "splits.json"
-        if not split_file.is_file():
-            raise ValueError(
-                f"source {spec!r} names split {split!r} but no split file was given "
-                f"(split_file=...) and {split_file} does not exist"
-            )
+    root, split, split_file = _split_arg(spec, rest, o)
     return nuscenes.load_nuscenes(
         root,
         version=_nuscenes_version(root),
-        split_file=split_file if split is not None else None,
+        split_file=split_file,
         split=split,
         image_size=o.image_size,
         render=o.render,
@@ -245,7 +262,13 @@ register_source(
     SourceKind("sim", "sim:<split>[:N]", "N synthetic drives (split train|val|test)", _open_sim)
 )
 register_source(
-    SourceKind("av2", "av2:PATH", "an Argoverse 2 log, or every log in a folder", _open_av2, True)
+    SourceKind(
+        "av2",
+        "av2:PATH[:split]",
+        "an Argoverse 2 log, or every log in a folder (a split needs a split file)",
+        _open_av2,
+        True,
+    )
 )
 register_source(
     SourceKind(

@@ -296,9 +296,29 @@ def write_nuscenes_fixture(
         ("calibrated_sensor", cal),
         ("sensor", sensors),
         ("log", logs),
+        # Tables the devkit loads (no annotations; a blank semantic-prior map mask).
+        ("category", []),
+        ("attribute", []),
+        ("visibility", []),
+        ("instance", []),
+        ("sample_annotation", []),
+        (
+            "map",
+            [
+                {
+                    "token": "map0",
+                    "log_tokens": ["log0"],
+                    "category": "semantic_prior",
+                    "filename": f"maps/{location}.png",
+                }
+            ],
+        ),
     ):
         dump(tdir / f"{name}.json", rows)
     dump(root / "maps" / "expansion" / f"{location}.json", map_json)
+    from PIL import Image
+
+    Image.new("L", (8, 8)).save(root / "maps" / f"{location}.png")
     if images:
         _render_images(root, version, tdir, cal, sample_data, ego_poses, seed)
     return root
