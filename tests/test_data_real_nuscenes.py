@@ -8,7 +8,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
 from icmapper.data.errors import DataError
 from icmapper.data.images import fit_size
 from icmapper.data.nuscenes import NUSCENES_CAMERAS, load_nuscenes
