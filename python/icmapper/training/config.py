@@ -133,7 +133,7 @@ def config_from_dict(raw: dict[str, Any]) -> TrainConfig:
 def apply_overrides(raw: dict[str, Any], overrides: dict[str, Any]) -> dict[str, Any]:
     """A copy of a TOML-shaped config dict with ``{"data.image_size": [64, 176], "seed": 1}``
     style overrides set (dotted names reach the tables; ``settings.parse_assignments`` parses
-    ``--set NAME=VALUE`` items into such a dict). Unknown keys are caught by ``config_from_dict``."""
+    ``--set NAME=VALUE`` items into such a dict). Unknown keys fail in ``config_from_dict``."""
     out = {k: (dict(v) if isinstance(v, dict) else v) for k, v in raw.items()}
     for name, value in overrides.items():
         table, dot, key = name.rpartition(".")
