@@ -24,6 +24,10 @@ BENCHMARKS: dict[str, tuple[str, str]] = {
         "training steps/s and per-module inference latency (small config)",
     ),
     "mapper": ("benchmarks.mapper", "per-frame latency of the online mapper by stage"),
+    "images": (
+        "benchmarks.images",
+        "real camera images: JPEG decode + resize frames/s by decoder and DataLoader workers",
+    ),
 }
 
 
