@@ -27,15 +27,17 @@ def log(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 def _devkit():  # noqa: ANN202
-    from icmapper.testing.devkits import prepare_devkit_imports
+    from icmapper.testing.devkits import import_devkit
 
-    prepare_devkit_imports()
-    pytest.importorskip("av2", reason="av2 devkit not installed")
-    import av2.utils.io as io_utils
-    from av2.geometry.camera.pinhole_camera import PinholeCamera
-    from av2.utils.synchronization_database import SynchronizationDB
-
-    return io_utils, PinholeCamera, SynchronizationDB
+    try:
+        io_utils, pin, sdb = import_devkit(
+            "av2.utils.io",
+            "av2.geometry.camera.pinhole_camera",
+            "av2.utils.synchronization_database",
+        )
+    except ImportError as e:
+        pytest.skip(f"av2 devkit not installed: {e}")
+    return io_utils, pin.PinholeCamera, sdb.SynchronizationDB
 
 
 def _check_against_devkit(log: Path) -> float:

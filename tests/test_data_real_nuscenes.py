@@ -26,10 +26,14 @@ def dataroot(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 @pytest.fixture(scope="module")
 def nusc(dataroot: Path):  # noqa: ANN201
-    from icmapper.testing.devkits import prepare_devkit_imports
+    from icmapper.testing.devkits import import_devkit
 
-    prepare_devkit_imports()
-    devkit = pytest.importorskip("nuscenes.nuscenes", reason="nuscenes-devkit not installed")
+    try:
+        (devkit, _, _) = import_devkit(
+            "nuscenes.nuscenes", "nuscenes.utils.geometry_utils", "pyquaternion"
+        )
+    except ImportError as e:
+        pytest.skip(f"nuscenes-devkit not installed: {e}")
     return devkit.NuScenes(version="v1.0-mini", dataroot=str(dataroot), verbose=False)
 
 

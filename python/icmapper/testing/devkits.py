@@ -10,27 +10,30 @@ are not installed: any drawing call would fail loudly, and no reading path calls
 
 from __future__ import annotations
 
+import importlib
 import sys
 import types
 
 
-def _stub(name: str) -> None:
-    try:
-        __import__(name)
-    except ImportError:
-        sys.modules[name] = types.ModuleType(name)
-
-
-def prepare_devkit_imports() -> None:
-    """Installs the stand-ins for ``cv2`` (with ``cv2.typing.MatLike``) and ``sklearn.metrics``
-    where those packages are absent; idempotent."""
+def import_devkit(*modules: str) -> list[types.ModuleType]:
+    """Imports the named devkit modules with the stand-ins for ``cv2`` (with
+    ``cv2.typing.MatLike``) and ``sklearn.metrics`` in place where those packages are absent, then
+    removes the stand-ins from ``sys.modules`` again (the devkit modules keep their references;
+    nothing else in the process sees them). ImportError when a devkit is not installed."""
+    added = []
     for name in ("cv2", "cv2.typing", "sklearn", "sklearn.metrics"):
-        _stub(name)
-    cv2, typing_mod = sys.modules["cv2"], sys.modules["cv2.typing"]
-    if not hasattr(typing_mod, "MatLike"):
-        typing_mod.MatLike = object  # type: ignore[attr-defined]
-    if not hasattr(cv2, "typing"):
-        cv2.typing = typing_mod  # type: ignore[attr-defined]
-    sklearn = sys.modules["sklearn"]
-    if not hasattr(sklearn, "metrics"):
-        sklearn.metrics = sys.modules["sklearn.metrics"]  # type: ignore[attr-defined]
+        try:
+            __import__(name)
+        except ImportError:
+            sys.modules[name] = types.ModuleType(name)
+            added.append(name)
+    if "cv2.typing" in added:
+        sys.modules["cv2.typing"].MatLike = object  # type: ignore[attr-defined]
+        sys.modules["cv2"].typing = sys.modules["cv2.typing"]  # type: ignore[attr-defined]
+    if "sklearn.metrics" in added:
+        sys.modules["sklearn"].metrics = sys.modules["sklearn.metrics"]  # type: ignore[attr-defined]
+    try:
+        return [importlib.import_module(m) for m in modules]
+    finally:
+        for name in added:
+            sys.modules.pop(name, None)
