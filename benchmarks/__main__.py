@@ -26,11 +26,15 @@ BENCHMARKS: dict[str, tuple[str, str]] = {
     "mapper": ("benchmarks.mapper", "per-frame latency of the online mapper by stage"),
     "train-step": (
         "benchmarks.train_step",
-        "training frames/s: the view transformer's former dense step vs its sparse step",
+        "training frames/s: the former training step vs the current one (one run)",
     ),
     "python-geometry": (
         "benchmarks.python_geometry",
         "icmapper.geom's engine calls vs batched numpy forms (resample, Chamfer, point clouds)",
+    ),
+    "images": (
+        "benchmarks.images",
+        "real camera images: JPEG decode + resize frames/s by decoder and DataLoader workers",
     ),
 }
 

@@ -11,3 +11,7 @@ fi
 .venv/bin/python -m pip install -q "maturin>=1.7,<2"
 # The package with its test extras; maturin builds the Rust extension (release) into the venv.
 .venv/bin/python -m pip install -q -e ".[test]"
+# The official devkits, test oracles of the real-image readers, without their dependency sets
+# (they pin numpy < 2 and shapely 2.0 and pull opencv, numba, kornia, ...): reading needs only
+# the test extras above (icmapper.testing.devkits explains the two stand-in modules).
+.venv/bin/python -m pip install -q --no-deps "nuscenes-devkit==1.2.0" "av2==0.3.6"

@@ -1,10 +1,12 @@
 """torch Datasets over Sequences: random consecutive clips (stage-1 training) and whole sequences
-(stage 2 / evaluation), with images rendered on the fly and an optional on-disk image cache.
+(stage 2 / evaluation), with images rendered on the fly or read from disk (real-image sources:
+JPEG decode + resize in the DataLoader workers, ``icmapper.data.images``) and an optional on-disk
+image cache.
 
 Item (a dict; docs/data.md):
     images        uint8   (T, C, 3, H, W)   (absent/None with images=False)
-    intrinsics    float32 (T, C, 3, 3)      pixels of the (H, W) images
-    cam_to_ego    float32 (T, C, 4, 4)      camera frame x right, y down, z forward
+    intrinsics    float32 (T, C, 3, 3)      pixels of the (H, W) images, per keyframe
+    cam_to_ego    float32 (T, C, 4, 4)      camera frame x right, y down, z forward, per keyframe
     poses         float64 (T, 4, 4)         ego->world
     gt            list of T dicts {ids int64 (k,), classes int64 (k,), points float32 (k, 20, 2)}
                   ego frame metres; ids stable over the whole sequence
@@ -121,14 +123,13 @@ class _SequenceItems:
 
     def item(self, s: int, frames: NDArray[np.int64]) -> dict:
         seq = self.sequences[s]
-        t = len(frames)
-        c = seq.rig.num_cameras
+        rigs = [seq.rig_of(int(i)) for i in frames]  # each keyframe's own camera parameters
         out: dict = {
             "intrinsics": torch.from_numpy(
-                np.broadcast_to(seq.rig.intrinsics.astype(np.float32), (t, c, 3, 3)).copy()
+                np.stack([r.intrinsics for r in rigs]).astype(np.float32)
             ),  # (T, C, 3, 3)
             "cam_to_ego": torch.from_numpy(
-                np.broadcast_to(seq.rig.cam_to_ego.astype(np.float32), (t, c, 4, 4)).copy()
+                np.stack([r.cam_to_ego for r in rigs]).astype(np.float32)
             ),  # (T, C, 4, 4)
             "poses": torch.from_numpy(seq.poses[frames].astype(np.float64)),  # (T, 4, 4)
             "gt": [_gt_dict(self.gt(s)[int(i)]) for i in frames],

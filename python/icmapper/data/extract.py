@@ -13,6 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from icmapper.data.errors import DataError
 from icmapper.data.types import CameraRig, WorldMap, pose_to_xy_yaw, xy_yaw_to_pose
 
 #: StreamMapNet's buffer for its overlap rules (metres, each line buffered by this much).
@@ -45,6 +46,44 @@ def se3(q: NDArray[np.float64], t: NDArray[np.float64]) -> NDArray[np.float64]:
     m[:3, :3] = quat_to_matrix(q)
     m[:3, 3] = np.asarray(t, dtype=np.float64)
     return m
+
+
+def interpolate_poses(
+    stamps_ns: NDArray[np.int64],
+    quats: NDArray[np.float64],
+    trans: NDArray[np.float64],
+    query_ns: NDArray[np.int64],
+    where: str = "poses",
+) -> NDArray[np.float64]:
+    """Poses at `query_ns` (Q,) from sorted samples (stamps_ns (N,), quats (N, 4) w x y z,
+    trans (N, 3)) -> (Q, 4, 4): translation linear in time, rotation by slerp; a query equal to a
+    sample gives that sample exactly. A query outside [first, last] raises DataError naming
+    `where`."""
+    q = np.asarray(query_ns, dtype=np.int64)
+    if len(q) and (q.min() < stamps_ns[0] or q.max() > stamps_ns[-1]):
+        raise DataError(
+            f"{where}: timestamp {int(q.min() if q.min() < stamps_ns[0] else q.max())} ns is "
+            f"outside the poses' time range [{int(stamps_ns[0])}, {int(stamps_ns[-1])}]"
+        )
+    j = np.clip(np.searchsorted(stamps_ns, q, side="right") - 1, 0, len(stamps_ns) - 1)  # (Q,)
+    out = np.empty((len(q), 4, 4))
+    for k, (t, i) in enumerate(zip(q.tolist(), j.tolist(), strict=True)):
+        if stamps_ns[i] == t or i + 1 >= len(stamps_ns):
+            out[k] = se3(quats[i], trans[i])
+            continue
+        a = (t - int(stamps_ns[i])) / float(int(stamps_ns[i + 1]) - int(stamps_ns[i]))
+        q0 = quats[i] / np.linalg.norm(quats[i])
+        q1 = quats[i + 1] / np.linalg.norm(quats[i + 1])
+        dot = float(q0 @ q1)
+        if dot < 0.0:
+            q1, dot = -q1, -dot
+        if dot > 0.9995:
+            qi = q0 + a * (q1 - q0)
+        else:
+            th = np.arccos(dot)
+            qi = (np.sin((1 - a) * th) * q0 + np.sin(a * th) * q1) / np.sin(th)
+        out[k] = se3(qi, (1 - a) * trans[i] + a * trans[i + 1])
+    return out
 
 
 def planar(pose: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -179,13 +218,19 @@ def connect_lines(lines: list[Line]) -> list[Line]:
     return out
 
 
+#: Holes of a drivable-area union smaller than this (m^2) are slivers between polygons that do
+#: not quite abut, not islands: they give no boundary.
+MIN_HOLE_AREA = 1.0
+
+
 def union_contours(polygons: list[NDArray[np.float64]]) -> list[NDArray[np.float64]]:
     """Contours of the union of polygons, each as an OPEN polyline that closes on itself
-    ((m + 1, 2): first point repeated at the end), largest area first.
+    ((m + 1, 2): first point repeated at the end): the outer rings (largest area first), then
+    the holes of the union (islands fully enclosed by the union: medians, blocks; largest first,
+    slivers below `MIN_HOLE_AREA` dropped), as StreamMapNet takes exteriors and interiors.
 
-    Deviation from StreamMapNet (documented in docs/data.md): `icmapper.geom.polygon_union`
-    returns outer rings only, so holes of the union (islands fully enclosed by road) are not
-    turned into boundaries.
+    Outer rings come from `icmapper.geom.polygon_union` (the engine); holes from shapely's union,
+    since the engine's union returns outer rings only.
     """
     from icmapper import geom
 
@@ -197,7 +242,27 @@ def union_contours(polygons: list[NDArray[np.float64]]) -> list[NDArray[np.float
         ring = np.asarray(ring, dtype=np.float64)
         if len(ring) >= 3:
             out.append(np.vstack([ring, ring[:1]]))
-    return out
+    return out + union_holes(rings)
+
+
+def union_holes(rings: list[NDArray[np.float64]]) -> list[NDArray[np.float64]]:
+    """The holes of the union of (n, 2) rings as closed (m + 1, 2) polylines, largest first."""
+    import shapely
+
+    polys = [shapely.make_valid(shapely.Polygon(r)) for r in rings]
+    union = shapely.union_all(polys)
+    holes = []
+    for g in shapely.get_parts(union):
+        if not isinstance(g, shapely.Polygon):
+            continue
+        for interior in g.interiors:
+            hole = shapely.Polygon(interior)
+            if hole.area >= MIN_HOLE_AREA:
+                pts = dedup_points(np.asarray(interior.coords, dtype=np.float64)[:-1])
+                if len(pts) >= 3:
+                    holes.append((hole.area, np.vstack([pts, pts[:1]])))
+    holes.sort(key=lambda h: -h[0])
+    return [h for _, h in holes]
 
 
 def subsample_indices(timestamps: NDArray[np.float64], hz: float) -> NDArray[np.int64]:

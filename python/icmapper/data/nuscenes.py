@@ -1,10 +1,21 @@
 """nuScenes reader (plain JSON, no devkit): official tables + map expansion -> Sequences with
-keyframe poses at 2 Hz, the real camera calibration and synthetic images rendered over the map.
+keyframe poses at 2 Hz and the six cameras' keyframe JPEGs with their full 3-D geometry (or, where
+the dataroot has no images or the renderer is asked for, synthetic images rendered over the map).
 
 Layout (the dataset's own):
     <dataroot>/<version>/{scene,sample,sample_data,ego_pose,calibrated_sensor,sensor,log}.json
     <dataroot>/maps/expansion/<location>.json     (node, line, polygon, lane_divider,
                                                    road_divider, ped_crossing, road_segment, lane)
+    <dataroot>/samples/CAM_*/<name>.jpg           keyframe images (sample_data "filename")
+
+Real images ("images" mode real, or auto with <dataroot>/samples/ present), as BEVFormer/MapTR's
+``obtain_sensor2top``: the keyframe's reference pose is the ego pose of its LIDAR_TOP sample_data
+(full SE(3)); each camera's keyframe sample_data has its own timestamp and ego pose, so
+camera -> reference ego = inv(ref_ego->world) @ cam_ego->world @ cam->cam_ego (calibrated_sensor),
+per keyframe (``Sequence.frame_rigs``). Intrinsics from calibrated_sensor, native size per
+sample_data (width/height; the JPEG header when absent), resized by ``images.fit_intrinsics``.
+Every JPEG is checked when the source opens (``images.check_jpeg``); a camera missing at a
+keyframe is a DataError naming the scene, sample and channel.
 
 Class extraction follows StreamMapNet: dividers = lane_divider + road_divider lines; crossings =
 ped_crossing polygons with touching/overlapping pieces unioned; boundaries = contours of the union
@@ -27,6 +38,7 @@ from numpy.typing import NDArray
 
 from icmapper.data.errors import DataError
 from icmapper.data.extract import LazyRenderer, dedup_points, planar, se3, union_contours
+from icmapper.data.images import RealImages, fit_intrinsics, resolve_images
 from icmapper.data.types import CameraRig, MapClass, MapInstance, Sequence, WorldMap
 
 TABLES = ("scene", "sample", "sample_data", "ego_pose", "calibrated_sensor", "sensor", "log")
@@ -105,7 +117,17 @@ class _MapLayers:
                 raise DataError(f"map file {path} lacks the layer {layer!r}")
         self.path = path
         self.data = data
-        self.nodes = {n["token"]: (float(n["x"]), float(n["y"])) for n in data["node"]}
+        self.nodes = {}
+        for n in data["node"]:
+            try:
+                xy = (float(n["x"]), float(n["y"]))
+            except (KeyError, TypeError, ValueError) as e:
+                raise DataError(
+                    f"map file {path}: node {n.get('token', '?')!r} has a bad coordinate ({e})"
+                ) from None
+            if not all(np.isfinite(xy)):
+                raise DataError(f"map file {path}: node {n.get('token', '?')!r} is not finite")
+            self.nodes[n["token"]] = xy
         self.lines = {ln["token"]: ln["node_tokens"] for ln in data["line"]}
         self.polygons = {p["token"]: p["exterior_node_tokens"] for p in data["polygon"]}
 
@@ -181,20 +203,25 @@ def load_nuscenes(
     image_size: tuple[int, int] = (128, 352),
     render: bool = True,
     seed: int = 0,
+    images: str = "auto",
 ) -> list[Sequence]:
     """The scenes of a nuScenes dataroot as Sequences (sorted by scene name).
 
     `split_file` + `split` select scenes by name (scenes of the split absent from the dataroot
-    are skipped; none present is an error). Keyframe poses are the ego poses of each sample's
-    LIDAR_TOP (else CAM_FRONT) sample_data, made planar; timestamps in seconds. The rig is the
-    calibration of the six cameras in the scene's first sample, intrinsics scaled to
-    `image_size` (H, W); images are rendered synthetically over the map (`render=True`).
+    are skipped; none present is an error). Timestamps in seconds.
+
+    images: "real" (the keyframe JPEGs of the six cameras, full SE(3) poses, per-keyframe rigs;
+    see the module docstring), "render" (planar poses, one rig from the scene's first sample with
+    intrinsics scaled per axis, synthetic images rendered over the map) or "auto" (real when
+    `<dataroot>/samples/` exists). `render=False`: the sequences carry no images (geometry and
+    ground truth only; JPEGs are not checked).
     """
     root = Path(dataroot)
     if not root.is_dir():
         raise DataError(f"nuScenes dataroot not found: {root}")
     if (split is None) != (split_file is None):
         raise ValueError("give both split_file and split, or neither")
+    real = resolve_images(images, (root / "samples").is_dir(), root / "samples")
     tables = _load_tables(root, version)
     scenes = sorted(tables["scene"].values(), key=lambda s: str(s.get("name", s["token"])))
     if split is not None and split_file is not None:
@@ -240,24 +267,110 @@ def load_nuscenes(
             sd = next((sds[c] for c in POSE_CHANNELS if c in sds), None)
             if sd is None:
                 raise DataError(f"scene {name}: sample {s['token']} has no {POSE_CHANNELS} data")
-            ep = tables["ego_pose"].get(sd.get("ego_pose_token", ""))
-            if ep is None:
-                raise DataError(f"scene {name}: sample_data {sd['token']} has no ego_pose")
-            poses[i] = planar(
-                se3(np.asarray(ep["rotation"], float), np.asarray(ep["translation"], float))
-            )
+            poses[i] = _ego_pose(tables, sd, name)
         timestamps = np.array([s["timestamp"] for s in samples], dtype=np.float64) * 1e-6
-        rig = _rig(tables, by_sample.get(samples[0]["token"], {}), name, image_size)
         log = tables["log"].get(scene.get("log_token", ""))
         if log is None:
             raise DataError(f"scene {name} refers to an unknown log")
         location = str(log["location"])
         if location not in maps:
             maps[location] = _MapLayers(root / "maps" / "expansion" / f"{location}.json")
+        if real:
+            rigs, files, native = [], [], []
+            for s, ref_pose in zip(samples, poses, strict=True):
+                rig, paths, hw = _real_rig(
+                    tables, root, by_sample.get(s["token"], {}), ref_pose, name, s, image_size
+                )
+                rigs.append(rig)
+                files.append(paths)
+                native.append(hw)
+            world = _scene_world(maps[location], name, poses)
+            loader = RealImages(files, native, image_size) if render else None
+            if loader is not None:
+                loader.check()
+            out.append(
+                Sequence(
+                    name,
+                    "nuscenes",
+                    world,
+                    timestamps,
+                    poses,
+                    rigs[0],
+                    loader,
+                    True,
+                    rigs,
+                    "real" if render else "none",
+                )  # fmt: skip
+            )
+            continue
+        poses = np.stack([planar(p) for p in poses])  # (T, 4, 4) the renderer's flat ground
+        rig = _rig(tables, by_sample.get(samples[0]["token"], {}), name, image_size)
         world = _scene_world(maps[location], name, poses)
         renderer = LazyRenderer(world, rig, poses, seed) if render else None
         out.append(Sequence(name, "nuscenes", world, timestamps, poses, rig, renderer, True))
     return out
+
+
+def _ego_pose(tables: dict, sd: dict, scene: str) -> NDArray[np.float64]:
+    """(4, 4) ego->world of a sample_data's ego_pose record."""
+    ep = tables["ego_pose"].get(sd.get("ego_pose_token", ""))
+    if ep is None:
+        raise DataError(f"scene {scene}: sample_data {sd['token']} has no ego_pose")
+    try:
+        return se3(np.asarray(ep["rotation"], float), np.asarray(ep["translation"], float))
+    except (KeyError, TypeError, ValueError) as e:
+        raise DataError(f"scene {scene}: ego_pose {ep['token']} is malformed ({e})") from None
+
+
+def _native_size(sd: dict, path: Path) -> tuple[int, int]:
+    """(h, w) of a camera sample_data: its height/width fields, else the JPEG header."""
+    h, w = int(sd.get("height") or 0), int(sd.get("width") or 0)
+    if h > 0 and w > 0:
+        return h, w
+    from PIL import Image
+
+    try:
+        with Image.open(path) as im:
+            return int(im.size[1]), int(im.size[0])
+    except OSError as e:
+        raise DataError(f"cannot read the size of image {path}: {e}") from None
+
+
+def _real_rig(
+    tables: dict,
+    root: Path,
+    sds: dict[str, dict],
+    ref_pose: NDArray[np.float64],
+    scene: str,
+    sample: dict,
+    image_size: tuple[int, int],
+) -> tuple[CameraRig, list[Path], list[tuple[int, int]]]:
+    """One keyframe's six cameras: rig (cam -> reference ego composed through the camera's own
+    ego pose), JPEG paths and native (h, w) sizes."""
+    ks, ts, paths, native = [], [], [], []
+    ref_inv = np.linalg.inv(ref_pose)  # (4, 4) world -> reference ego
+    for cam in NUSCENES_CAMERAS:
+        sd = sds.get(cam)
+        if sd is None:
+            raise DataError(
+                f"scene {scene}: sample {sample['token']} has no {cam} keyframe sample_data"
+            )
+        cs = tables["calibrated_sensor"][sd["calibrated_sensor_token"]]
+        k = np.asarray(cs.get("camera_intrinsic"), dtype=np.float64)
+        if k.shape != (3, 3):
+            raise DataError(f"calibrated_sensor {cs['token']}: camera_intrinsic must be 3x3")
+        path = root / str(sd.get("filename", ""))
+        hw = _native_size(sd, path)
+        cam_to_cam_ego = se3(
+            np.asarray(cs["rotation"], float), np.asarray(cs["translation"], float)
+        )
+        cam_ego = _ego_pose(tables, sd, scene)  # (4, 4) ego at the camera's timestamp -> world
+        ts.append(ref_inv @ cam_ego @ cam_to_cam_ego)  # (4, 4) camera -> reference ego
+        ks.append(fit_intrinsics(k, hw, image_size))
+        paths.append(path)
+        native.append(hw)
+    rig = CameraRig(NUSCENES_CAMERAS, np.stack(ks), np.stack(ts), tuple(image_size))  # type: ignore[arg-type]
+    return rig, paths, native
 
 
 def _rig(tables: dict, sds: dict[str, dict], scene: str, image_size: tuple[int, int]) -> CameraRig:

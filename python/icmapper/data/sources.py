@@ -5,12 +5,23 @@ and errors list the registry.
 
     sim:val            4 synthetic validation drives (cities of sim.CITY_SEEDS["val"])
     sim:<split>:N      N synthetic drives of split train / val / test
-    av2:PATH           the drive of an Argoverse 2 log, or of every log in a folder of logs
+    av2:PATH[:split]   the drive of an Argoverse 2 log, or of every log in a folder of logs (a
+                       split keeps the logs named in a split file: `split_file=` or
+                       <PATH>/splits.json)
     av2-drives:PATH:N  N synthetic drives along the lane graph of each log under PATH
     nuscenes:PATH[:split]
                        the scenes of a nuScenes dataroot (version: v1.0-trainval if present, else
                        the only v1.0-* folder); the split needs a split file: `split_file=` or
                        <PATH>/splits.json
+
+Options follow the spec as `:NAME=VALUE` segments, e.g. `av2:PATH:images=render`,
+`nuscenes:PATH:val:images=real` (`SPEC_OPTIONS`):
+
+    images=auto|real|render   real-data kinds (av2, nuscenes): "real" reads the log's own camera
+                              JPEGs and its cameras (7 AV2 ring cameras, 6 nuScenes cameras),
+                              with full SE(3) poses and per-keyframe camera parameters; "render"
+                              renders synthetic images over the map (planar poses); "auto" (the
+                              default): real where the data has images, else render
 """
 
 from __future__ import annotations
@@ -45,15 +56,48 @@ def _nuscenes_version(root: Path) -> str:
     return found[0]
 
 
+#: Options a spec may carry as trailing `:NAME=VALUE` segments, with their accepted values.
+SPEC_OPTIONS: dict[str, tuple[str, ...]] = {"images": ("auto", "real", "render")}
+
+
 @dataclass(frozen=True)
 class SourceOptions:
-    """What every source kind's opener gets besides the spec: the image size (H, W) of rendered
-    images, the seed of synthetic drives and renderers, a split file, and whether to render."""
+    """What every source kind's opener gets besides the spec: the image size (H, W) of the
+    images (rendered, or real ones resized), the seed of synthetic drives and renderers, a split
+    file, whether the sequences need images at all (`render`; False: geometry and ground truth
+    only) and where images come from (`images`: auto | real | render, see the module docstring;
+    kinds without real images ignore it)."""
 
     image_size: tuple[int, int] = (128, 352)
     seed: int = 0
     split_file: str | Path | None = None
     render: bool = True
+    images: str = "auto"
+
+
+def split_options(spec: str) -> tuple[str, dict[str, str]]:
+    """`"av2:PATH:images=render"` -> (`"av2:PATH"`, {"images": "render"}). Trailing segments of
+    the form NAME=VALUE are options; an unknown name or value raises ValueError."""
+    base, opts = spec, {}
+    while True:
+        head, sep, last = base.rpartition(":")
+        m = re.fullmatch(r"([A-Za-z_]+)=(.*)", last) if sep else None
+        if m is None:
+            break
+        name, value = m.group(1), m.group(2)
+        if name not in SPEC_OPTIONS:
+            raise ValueError(
+                f"bad source spec {spec!r}: unknown option {name!r} "
+                f"(known: {', '.join(SPEC_OPTIONS)})"
+            )
+        if value not in SPEC_OPTIONS[name]:
+            raise ValueError(
+                f"bad source spec {spec!r}: {name} must be one of "
+                f"{'|'.join(SPEC_OPTIONS[name])}, got {value!r}"
+            )
+        opts.setdefault(name, value)
+        base = head
+    return base, opts
 
 
 @dataclass(frozen=True)
@@ -83,7 +127,12 @@ def register_source(kind: SourceKind) -> SourceKind:
 
 def sources_help() -> str:
     """One line per registered kind: usage and help (for the command line and errors)."""
-    return "\n".join(f"  {k.usage:<24} {k.help}" for k in SOURCE_KINDS.values())
+    lines = [f"  {k.usage:<24} {k.help}" for k in SOURCE_KINDS.values()]
+    lines.append(
+        "  options: append :images=auto|real|render (real-data kinds; default auto: the log's "
+        "own camera images where present)"
+    )
+    return "\n".join(lines)
 
 
 def open_source(
@@ -92,27 +141,38 @@ def open_source(
     seed: int = 0,
     split_file: str | Path | None = None,
     render: bool = True,
+    images: str | None = None,
 ) -> list[Sequence]:
-    """The sequences a spec names (see the module docstring). Raises ValueError for a bad spec
-    and DataError (a ValueError) for missing or broken data."""
+    """The sequences a spec names (see the module docstring). `images` (auto | real | render)
+    applies where the spec carries no `:images=` option. Raises ValueError for a bad spec and
+    DataError (a ValueError) for missing or broken data."""
     usages = ", ".join(repr(k.usage) for k in SOURCE_KINDS.values())
     if not isinstance(spec, str) or ":" not in spec:
         raise ValueError(f"bad source spec {spec!r}: expected one of {usages}")
+    full = spec
+    spec, opts = split_options(spec)
+    if images is not None and images not in SPEC_OPTIONS["images"]:
+        raise ValueError(f"images must be one of {SPEC_OPTIONS['images']}, got {images!r}")
+    mode = opts.get("images", images or "auto")
+    if ":" not in spec:
+        raise ValueError(f"bad source spec {full!r}: expected one of {usages}")
     name, rest = spec.split(":", 1)
     kind = SOURCE_KINDS.get(name)
     if kind is None:
         raise ValueError(
             f"bad source spec {spec!r}: unknown kind {name!r} ({', '.join(SOURCE_KINDS)})"
         )
-    return kind.open(spec, rest, SourceOptions(image_size, seed, split_file, render))
+    return kind.open(spec, rest, SourceOptions(image_size, seed, split_file, render, mode))
 
 
 def source_tag(spec: str) -> str:
     """A folder name for a spec's run: "sim-val-4", "av2-<last path component>", ..."""
-    name, _, rest = spec.partition(":")
+    base, opts = split_options(spec)
+    name, _, rest = base.partition(":")
     kind = SOURCE_KINDS.get(name)
     if kind is not None and kind.path_tag:
         rest = Path(rest.split(":")[0]).name or "data"
+    rest += "".join(f"-{k}-{v}" for k, v in sorted(opts.items()))
     return re.sub(r"[^A-Za-z0-9_.-]+", "-", f"{name}-{rest}").strip("-")
 
 
@@ -127,14 +187,44 @@ def _open_sim(spec: str, rest: str, o: SourceOptions) -> list[Sequence]:
     return list(sim.sim_sequences(parts[0], n, seed=o.seed, image_size=o.image_size))
 
 
+def _split_arg(spec: str, rest: str, o: SourceOptions) -> tuple[Path, str | None, Path | None]:
+    """PATH[:split] -> (path, split, split file): a split needs `split_file` or PATH/splits.json."""
+    path, split = rest, None
+    if not Path(rest).is_dir() and ":" in rest:
+        path, split = rest.rsplit(":", 1)
+    root = Path(path)
+    if not root.is_dir():
+        raise ValueError(f"bad source spec {spec!r}: {root} is not a directory")
+    split_file = Path(o.split_file) if o.split_file is not None else None
+    if split is not None and split_file is None:
+        split_file = root / "splits.json"
+        if not split_file.is_file():
+            raise ValueError(
+                f"source {spec!r} names split {split!r} but no split file was given "
+                f"(split_file=...) and {split_file} does not exist"
+            )
+    return root, split, split_file if split is not None else None
+
+
 def _open_av2(spec: str, rest: str, o: SourceOptions) -> list[Sequence]:
     from icmapper.data import av2
+    from icmapper.data.errors import DataError
+    from icmapper.data.nuscenes import read_split
 
     if not rest:
         raise ValueError(f"bad source spec {spec!r}: no path")
+    root, split, split_file = _split_arg(spec, rest, o)
+    logs = av2.find_av2_logs(root)
+    if split is not None and split_file is not None:
+        wanted = set(read_split(split_file, split))
+        logs = [log for log in logs if log.name in wanted]
+        if not logs:
+            raise DataError(f"no log of split {split!r} ({split_file}) is in {root}")
     return [
-        av2.load_av2_sequence(log, image_size=o.image_size, render=o.render, seed=o.seed)
-        for log in av2.find_av2_logs(rest)
+        av2.load_av2_sequence(
+            log, image_size=o.image_size, render=o.render, seed=o.seed, images=o.images
+        )
+        for log in logs
     ]
 
 
@@ -155,28 +245,16 @@ def _open_av2_drives(spec: str, rest: str, o: SourceOptions) -> list[Sequence]:
 def _open_nuscenes(spec: str, rest: str, o: SourceOptions) -> list[Sequence]:
     from icmapper.data import nuscenes
 
-    path, split = rest, None
-    if not Path(rest).is_dir() and ":" in rest:
-        path, split = rest.rsplit(":", 1)
-    root = Path(path)
-    if not root.is_dir():
-        raise ValueError(f"bad source spec {spec!r}: {root} is not a directory")
-    split_file = o.split_file
-    if split is not None and split_file is None:
-        split_file = root / "splits.json"
-        if not split_file.is_file():
-            raise ValueError(
-                f"source {spec!r} names split {split!r} but no split file was given "
-                f"(split_file=...) and {split_file} does not exist"
-            )
+    root, split, split_file = _split_arg(spec, rest, o)
     return nuscenes.load_nuscenes(
         root,
         version=_nuscenes_version(root),
-        split_file=split_file if split is not None else None,
+        split_file=split_file,
         split=split,
         image_size=o.image_size,
         render=o.render,
         seed=o.seed,
+        images=o.images,
     )
 
 
@@ -184,7 +262,13 @@ register_source(
     SourceKind("sim", "sim:<split>[:N]", "N synthetic drives (split train|val|test)", _open_sim)
 )
 register_source(
-    SourceKind("av2", "av2:PATH", "an Argoverse 2 log, or every log in a folder", _open_av2, True)
+    SourceKind(
+        "av2",
+        "av2:PATH[:split]",
+        "an Argoverse 2 log, or every log in a folder (a split needs a split file)",
+        _open_av2,
+        True,
+    )
 )
 register_source(
     SourceKind(

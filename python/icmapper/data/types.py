@@ -119,8 +119,9 @@ class CameraRig:
 
 @dataclass
 class Frame:
-    """One keyframe. pose (4, 4) float64 ego->world; images (C, 3, H, W) uint8 or None when the
-    source has no images."""
+    """One keyframe. pose (4, 4) float64 ego->world (full SE(3) for real logs; mapping uses its
+    (x, y, yaw)); rig: this keyframe's camera parameters; images (C, 3, H, W) uint8 or None when
+    the source has no images."""
 
     index: int
     timestamp: float
@@ -129,12 +130,23 @@ class Frame:
     images: NDArray[np.uint8] | None = None
 
 
+#: What a sequence's ``render(i)`` gives: images read from the log's own cameras, images
+#: rendered by the simulator over the map, or none.
+IMAGE_KINDS = ("real", "rendered", "none")
+
+
 @dataclass
 class Sequence:
     """A drive through a world: T keyframes (timestamps (T,) seconds, poses (T, 4, 4)), the world
-    it drives through (ground truth with identity) and, optionally, a renderer of its images.
+    it drives through (ground truth with identity) and, optionally, the images of its frames.
 
-    render(i) -> (C, 3, H, W) uint8 images of frame i (None: the source has no images).
+    render(i) -> (C, 3, H, W) uint8 images of frame i: read from disk for real-image sources,
+    rendered by the simulator otherwise (None: the sequence has no images); ``images`` says which
+    ("real" | "rendered" | "none").
+    rig: the sequence's nominal camera rig (frame 0's); ``frame_rigs`` (T rigs, or None when one
+    rig holds for every frame) gives each keyframe's own camera parameters: for real logs the
+    camera->reference-ego transform is composed through the ego poses at the camera and
+    reference timestamps, so it changes from keyframe to keyframe (``rig_of(i)``).
     gt_ids_by_matching: the world's instances carry no identity usable across frames (nuScenes):
     ground-truth ids are derived by matching consecutive frames (``gt.derive_ids_by_matching``).
     """
@@ -147,9 +159,26 @@ class Sequence:
     rig: CameraRig
     render: Callable[[int], NDArray[np.uint8]] | None = None
     gt_ids_by_matching: bool = False
+    frame_rigs: list[CameraRig] | None = None
+    images: str = ""
+
+    def __post_init__(self) -> None:
+        if not self.images:
+            self.images = "none" if self.render is None else "rendered"
+        if self.images not in IMAGE_KINDS:
+            raise ValueError(f"Sequence.images must be one of {IMAGE_KINDS}, got {self.images!r}")
+        if self.frame_rigs is not None and len(self.frame_rigs) != len(self.timestamps):
+            raise ValueError(
+                f"sequence {self.name!r}: {len(self.frame_rigs)} frame rigs for "
+                f"{len(self.timestamps)} frames"
+            )
 
     def __len__(self) -> int:
         return int(self.timestamps.shape[0])
+
+    def rig_of(self, i: int) -> CameraRig:
+        """The camera rig of keyframe i (its own when the sequence has per-frame rigs)."""
+        return self.rig if self.frame_rigs is None else self.frame_rigs[i]
 
     def frame(self, i: int, with_images: bool = True) -> Frame:
         if not -len(self) <= i < len(self):
@@ -158,7 +187,7 @@ class Sequence:
             )
         i %= len(self)
         images = self.render(i) if (with_images and self.render is not None) else None
-        return Frame(i, float(self.timestamps[i]), self.poses[i], self.rig, images)
+        return Frame(i, float(self.timestamps[i]), self.poses[i], self.rig_of(i), images)
 
 
 @dataclass

@@ -1,4 +1,8 @@
-"""``icmapper train --config PATH [--stage 1|2] [--resume] [--out DIR] [--max-steps N]``.
+"""``icmapper train --config PATH [--set TABLE.KEY=VALUE ...] [--stage 1|2] [--resume] [--out DIR]
+[--max-steps N]``.
+
+``--set`` overrides one config value (repeatable), e.g. ``--set data.image_size=[64,176]
+--set model.channels=32 --set data.source="nuscenes:/data/nuscenes:train"``; values are TOML.
 
 Runs under torchrun for DDP (``torchrun --nproc_per_node N -m icmapper train ...``).
 """
@@ -13,6 +17,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     """Adds the ``train`` command."""
     p = subparsers.add_parser("train", help="train the networks (stage 1 or 2)")
     p.add_argument("--config", required=True, type=Path, help="TOML config (configs/small.toml)")
+    p.add_argument(
+        "--set",
+        action="append",
+        metavar="TABLE.KEY=VALUE",
+        help="override a config value (repeatable; TOML value), e.g. data.image_size=[64,176]",
+    )
     p.add_argument("--stage", type=int, choices=(1, 2), default=1)
     p.add_argument("--resume", action="store_true", help="continue OUT/stage{n}.pt")
     p.add_argument("--out", type=Path, default=Path("runs/train"), help="output folder")
@@ -29,7 +39,9 @@ def run(args: argparse.Namespace) -> int:
 
     if args.max_steps is not None and args.max_steps < 0:
         raise ValueError("--max-steps must be >= 0")
-    cfg = load_config(args.config)
+    from icmapper.settings import parse_assignments
+
+    cfg = load_config(args.config, parse_assignments(args.set or []))
     info = init_distributed()
     try:
         result = train(

@@ -30,6 +30,8 @@ class DataConfig:
     num_workers: int = 0
     #: On-disk image cache folder (icmapper.data.datasets.ImageCache), "" for none; one per size.
     cache_dir: str = ""
+    #: Split file for a source spec naming a split ("nuscenes:PATH:train"), "" for PATH/splits.json.
+    split_file: str = ""
 
 
 @dataclass(frozen=True)
@@ -128,8 +130,27 @@ def config_from_dict(raw: dict[str, Any]) -> TrainConfig:
     return cfg
 
 
-def load_config(path: str | Path) -> TrainConfig:
-    """Reads a TOML config file (ValueError on bad content, OSError when unreadable)."""
+def apply_overrides(raw: dict[str, Any], overrides: dict[str, Any]) -> dict[str, Any]:
+    """A copy of a TOML-shaped config dict with ``{"data.image_size": [64, 176], "seed": 1}``
+    style overrides set (dotted names reach the tables; ``settings.parse_assignments`` parses
+    ``--set NAME=VALUE`` items into such a dict). Unknown keys fail in ``config_from_dict``."""
+    out = {k: (dict(v) if isinstance(v, dict) else v) for k, v in raw.items()}
+    for name, value in overrides.items():
+        table, dot, key = name.rpartition(".")
+        if not dot:
+            out[key] = value
+        elif table in _TABLES:
+            out.setdefault(table, {})[key] = value
+        else:
+            raise ValueError(
+                f"bad override {name!r}: unknown table {table!r} ({', '.join(_TABLES)})"
+            )
+    return out
+
+
+def load_config(path: str | Path, overrides: dict[str, Any] | None = None) -> TrainConfig:
+    """Reads a TOML config file, then applies ``overrides`` (``apply_overrides``); ValueError on
+    bad content, OSError when unreadable."""
     if sys.version_info < (3, 11):  # pragma: no cover
         raise RuntimeError("TOML configs need Python >= 3.11 (tomllib)")
     import tomllib
@@ -140,7 +161,7 @@ def load_config(path: str | Path) -> TrainConfig:
     except tomllib.TOMLDecodeError as exc:
         raise ValueError(f"config {path}: bad TOML: {exc}") from None
     try:
-        return config_from_dict(raw)
+        return config_from_dict(apply_overrides(raw, overrides or {}))
     except ValueError as exc:
         raise ValueError(f"config {path}: {exc}") from None
 

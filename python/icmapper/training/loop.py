@@ -77,7 +77,12 @@ def build_dataset(cfg: TrainConfig, stage: int) -> tuple[Dataset, Any]:
         raise RuntimeError(
             f"data source {spec!r} needs icmapper.data.datasets/sources, not available: {exc}"
         ) from None
-    seqs = sources.open_source(spec, image_size=tuple(cfg.data.image_size), seed=cfg.seed)
+    seqs = sources.open_source(
+        spec,
+        image_size=tuple(cfg.data.image_size),
+        seed=cfg.seed,
+        split_file=cfg.data.split_file or None,
+    )
     ds = datasets.ClipDataset(
         seqs,
         clip_len=clip_len,

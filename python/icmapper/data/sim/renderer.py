@@ -21,6 +21,7 @@ No I/O here. Output (C, 3, H, W) uint8.
 
 from __future__ import annotations
 
+import copy
 import weakref
 from collections import OrderedDict
 from dataclasses import dataclass
@@ -74,6 +75,7 @@ class Renderer:
     vehicles). rig: the CameraRig (intrinsics (C, 3, 3), cam_to_ego (C, 4, 4), image_size (H, W)).
     seed: palette, vehicles and the default frame seed. resolution: raster metres per pixel (it is
     coarsened for very large worlds so that the raster stays below `max_raster_pixels`).
+    vehicles: False renders the world without vehicles (test fixtures).
     """
 
     def __init__(
@@ -83,6 +85,7 @@ class Renderer:
         seed: int = 0,
         resolution: float = 0.1,
         max_raster_pixels: int = 36_000_000,
+        vehicles: bool = True,
     ) -> None:
         if not isinstance(world, WorldMap):
             raise TypeError(f"world must be a WorldMap, got {type(world).__name__}")
@@ -102,8 +105,24 @@ class Renderer:
         self._grain = rng.standard_normal(
             2 * n_cam * 3 * rig.image_size[0] * rig.image_size[1]
         ).astype(np.float32)
-        self._vehicles = _make_vehicles(world, rng)
+        self._vehicles = _make_vehicles(world, rng) if vehicles else _no_vehicles()
         self._raster: _Raster | None = None
+
+    def with_rig(self, rig: CameraRig) -> Renderer:
+        """A renderer of the same world (its raster shared, painted once), palette, texture and
+        vehicles for other cameras: test fixtures render each camera of each frame through its
+        own geometry without repainting the world."""
+        if not isinstance(rig, CameraRig):
+            raise TypeError(f"rig must be a CameraRig, got {type(rig).__name__}")
+        other = copy.copy(self)
+        other.rig = rig
+        other._cast_rays()
+        n = 2 * rig.num_cameras * 3 * rig.image_size[0] * rig.image_size[1]
+        other._grain = (
+            np.random.default_rng([self.seed, 0x6A]).standard_normal(n).astype(np.float32)
+        )
+        other._raster = self._ensure_raster()
+        return other
 
     # ------------------------------------------------------------------ setup
     def _palette(self, rng: np.random.Generator) -> None:
@@ -498,6 +517,11 @@ def _zebra_bars(ring: NDArray) -> list[NDArray[np.float64]]:
             if isinstance(g, Polygon) and not g.is_empty:
                 bars.append(np.asarray(g.exterior.coords))
     return bars
+
+
+def _no_vehicles() -> _Vehicles:
+    z = np.zeros((0,), np.float64)
+    return _Vehicles(np.zeros((0, 2)), z, np.zeros((0, 3)), np.zeros((0, 3), np.float32), [], z, z)
 
 
 def _make_vehicles(world: WorldMap, rng: np.random.Generator) -> _Vehicles:
