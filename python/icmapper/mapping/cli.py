@@ -210,11 +210,11 @@ def cmd_compare(args: argparse.Namespace) -> int:
 
 
 def _default_methods(args: argparse.Namespace) -> tuple[str, ...]:
-    """Every registered method; without the learned detector, those that differ without it."""
+    """Every registered method; without the learned detector, those distinct without it."""
     from icmapper.mapping.methods import methods
 
     learned = args.detections == "learned"
-    return tuple(n for n, info in methods().items() if learned or not info.learned_only)
+    return tuple(n for n, info in methods().items() if learned or info.distinct_without_learned)
 
 
 def _common(p: argparse.ArgumentParser) -> None:

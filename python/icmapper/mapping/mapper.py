@@ -64,9 +64,9 @@ UNTRACKED_ID_BASE = 1 << 40
 @dataclass(frozen=True)
 class Variant:
     """A variant of the learned mapper (paper Table 4): temporal detector memory, learned
-    association, spatial fusion; one line of help; ``learned_only``: it differs from another
-    variant only with the learned detector (on oracle or file detections, without query features
-    and fusion, "no-fusion" is "full" and "single-frame" is "base")."""
+    association, spatial fusion; one line of help; ``learned_only``: refused without the learned
+    detector (on oracle or file detections, without query features and fusion, "no-fusion" is
+    "full" and "single-frame" is "base"; "base" is allowed there too and equals "full")."""
 
     temporal: bool
     use_association: bool

@@ -31,13 +31,15 @@ MethodBuilder = Callable[["DetectionSource", "MapperConfig", PerceptionRange], "
 class MethodInfo:
     """A registered method: its name, one line of help, and how it is built (exactly one of
     ``variant`` and ``build``); ``learned_only``: it needs the learned detector's networks (it
-    cannot run on oracle or file detections)."""
+    cannot run on oracle or file detections); ``distinct_without_learned``: without the learned
+    detector it differs from every other method (`compare` runs it by default then)."""
 
     name: str
     help: str
     variant: str | None = None
     build: MethodBuilder | None = None
     learned_only: bool = False
+    distinct_without_learned: bool = True
 
     def __post_init__(self) -> None:
         if (self.variant is None) == (self.build is None):
@@ -75,7 +77,16 @@ def _register_variants() -> None:
 
     for variant, v in VARIANTS.items():
         name = "icmapper" if variant == "full" else f"icmapper-{variant}"
-        register_method(MethodInfo(name, v.help, variant=variant, learned_only=v.learned_only))
+        # without query features and fusion every variant but "full" repeats another one
+        register_method(
+            MethodInfo(
+                name,
+                v.help,
+                variant=variant,
+                learned_only=v.learned_only,
+                distinct_without_learned=variant == "full",
+            )
+        )
 
 
 _register_variants()
