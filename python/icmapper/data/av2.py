@@ -225,7 +225,16 @@ def load_av2_world(log_dir: str | Path) -> WorldMap:
     log id (instances with map-derived ids, drivable polygons, lane graph of vehicle/bus lanes)."""
     log = _log_dir(log_dir)
     path = _map_archive(log)
-    return world_from_archive(read_map_archive(path), log.name, path)
+    world = world_from_archive(read_map_archive(path), log.name, path)
+    world.geo = archive_city(path)
+    return world
+
+
+def archive_city(path: Path) -> str:
+    """The city code of a map archive named ``log_map_archive_<log>____<CITY>_city_<n>.json``
+    (as the av2 devkit reads it), "" when the name does not say."""
+    parts = path.stem.split("____")
+    return parts[1].split("_")[0] if len(parts) == 2 else ""
 
 
 def _read_feather(path: Path, columns: tuple[str, ...]) -> pa.Table:

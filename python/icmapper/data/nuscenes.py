@@ -31,6 +31,7 @@ non-list keys such as "source" ignored), e.g. ../shared/data/splits/nuscenes_new
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -284,7 +285,7 @@ def load_nuscenes(
                 rigs.append(rig)
                 files.append(paths)
                 native.append(hw)
-            world = _scene_world(maps[location], name, poses)
+            world = replace(_scene_world(maps[location], name, poses), geo=location)
             loader = RealImages(files, native, image_size) if render else None
             if loader is not None:
                 loader.check()
@@ -305,7 +306,7 @@ def load_nuscenes(
             continue
         poses = np.stack([planar(p) for p in poses])  # (T, 4, 4) the renderer's flat ground
         rig = _rig(tables, by_sample.get(samples[0]["token"], {}), name, image_size)
-        world = _scene_world(maps[location], name, poses)
+        world = replace(_scene_world(maps[location], name, poses), geo=location)
         renderer = LazyRenderer(world, rig, poses, seed) if render else None
         out.append(Sequence(name, "nuscenes", world, timestamps, poses, rig, renderer, True))
     return out

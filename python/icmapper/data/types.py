@@ -94,12 +94,15 @@ class LaneSegment:
 @dataclass
 class WorldMap:
     """The static world of a city or log: map instances (with true identity), drivable-area
-    polygons (each (n, 2) float64) and the lane graph used to drive an ego through it."""
+    polygons (each (n, 2) float64) and the lane graph used to drive an ego through it; ``geo``:
+    where its frame lies on Earth (a key of ``icmapper.georef.GEO_FRAMES``: an AV2 city code such
+    as "PIT" or a nuScenes map location such as "boston-seaport"; "" when unknown)."""
 
     name: str
     instances: list[MapInstance]
     drivable: list[NDArray[np.float64]] = field(default_factory=list)
     lanes: dict[int, LaneSegment] = field(default_factory=dict)
+    geo: str = ""
 
 
 @dataclass

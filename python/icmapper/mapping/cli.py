@@ -74,6 +74,7 @@ def run_methods(
 
     from icmapper.data import gt as gt_mod
     from icmapper.eval.runfmt import RunWriter
+    from icmapper.georef import GEO_FRAMES, write_geojson_wgs84
     from icmapper.mapping.config import MapperConfig
     from icmapper.mapping.plot import plot_global_maps
     from icmapper.mapping.run import DetectionInput, map_sequence, method_factory
@@ -107,7 +108,9 @@ def run_methods(
             if recorder is not None and records is None:
                 records = recorder.records
             writers[m].add_sequence(seq.name, frames, gmap)
-            gmap.to_geojson(str(out / m / f"{seq.name}.geojson"))
+            gmap.to_geojson(str(out / m / f"{seq.name}.geojson"))  # the local map frame
+            if seq.world.geo in GEO_FRAMES:  # and WGS84 where the frame's origin is known
+                write_geojson_wgs84(gmap, seq.world.geo, out / m / f"{seq.name}.wgs84.geojson")
             if pictures:
                 plot_global_maps(
                     gmap,

@@ -1,0 +1,199 @@
+"""Geo-referencing: a dataset's local map frame -> WGS84 longitude / latitude, and GeoJSON export of
+a global map in WGS84 (RFC 7946) beside the engine's local-frame export.
+
+Each ``GeoFrame`` is one published origin of a dataset's frames, in the ``GEO_FRAMES`` registry:
+- Argoverse 2 cities (ATX, DTW, MIA, PAO, PIT, WDC): the city frame is UTM (WGS84 ellipsoid, the
+  city's northern zone) shifted by the UTM coordinates of the city origin; converted back with the
+  inverse UTM projection (pyproj), as av2-api's ``av2.geometry.utm.convert_city_coords_to_wgs84``
+  does (origins and zones from av2-api 0.3.6, ``av2/geometry/utm.py``).
+- nuScenes map locations: the map frame's origin is a reference coordinate at the south-western
+  corner and x points east, y north; a point is the destination from the reference at bearing
+  atan2(x, y) and distance |(x, y)| on a sphere of radius 6,378,137 m, as nuscenes-devkit's
+  ``nuscenes/scripts/export_poses.py`` (``derive_latlon``, ``get_coordinate``; devkit 1.2.0)
+  computes it (the devkit uses atan(x / y), the same angle in the map's positive quadrant).
+
+Accuracy is the datasets' own: these are the devkits' conversions, not survey-grade.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import tempfile
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+if TYPE_CHECKING:
+    from icmapper._icmap import GlobalMap
+
+#: Earth radius of nuscenes-devkit's export_poses (metres).
+NUSCENES_EARTH_RADIUS = 6.378137e6
+
+
+@dataclass(frozen=True)
+class GeoFrame:
+    """A local map frame's place on Earth: ``to_lonlat(xy (n, 2) metres) -> (n, 2)`` degrees as
+    (longitude, latitude); ``describe`` names the frame and its conversion."""
+
+    name: str
+    describe: str
+    to_lonlat: Callable[[NDArray[np.float64]], NDArray[np.float64]]
+
+
+GEO_FRAMES: dict[str, GeoFrame] = {}
+
+
+def register_geo_frame(frame: GeoFrame) -> GeoFrame:
+    if frame.name in GEO_FRAMES:
+        raise ValueError(f"geo frame {frame.name!r} is registered twice")
+    GEO_FRAMES[frame.name] = frame
+    return frame
+
+
+def geo_frame(name: str) -> GeoFrame:
+    """The registered frame ``name`` (ValueError listing the known ones)."""
+    if name not in GEO_FRAMES:
+        raise ValueError(f"no geo reference for {name!r}; known: {', '.join(sorted(GEO_FRAMES))}")
+    return GEO_FRAMES[name]
+
+
+def _check_xy(xy: NDArray[np.floating]) -> NDArray[np.float64]:
+    pts = np.asarray(xy, dtype=np.float64)
+    if pts.ndim != 2 or pts.shape[1] != 2:
+        raise ValueError(f"points must be (n, 2), got {pts.shape}")
+    if not np.all(np.isfinite(pts)):
+        raise ValueError("points contain NaN or inf")
+    return pts
+
+
+# ---------------------------------------------------------------------- Argoverse 2 (UTM)
+#: city code -> (UTM zone (north), origin latitude, origin longitude): av2-api 0.3.6.
+AV2_CITIES: dict[str, tuple[int, float, float]] = {
+    "ATX": (14, 30.27464237939507, -97.7404457407424),
+    "DTW": (17, 42.29993066912924, -83.17555750783717),
+    "MIA": (17, 25.77452579915163, -80.19656914449405),
+    "PAO": (10, 37.416065, -122.13571963362166),
+    "PIT": (17, 40.44177902989321, -80.01294377242584),
+    "WDC": (18, 38.889377, -77.0355047439081),
+}
+
+
+def _av2_converter(zone: int, lat0: float, lon0: float) -> Callable[[NDArray], NDArray]:
+    def to_lonlat(xy: NDArray[np.floating]) -> NDArray[np.float64]:
+        from pyproj import Proj
+
+        pts = _check_xy(xy)
+        proj = Proj(proj="utm", zone=zone, ellps="WGS84", datum="WGS84", units="m")
+        e0, n0 = proj(lon0, lat0)  # origin easting, northing
+        lon, lat = proj(pts[:, 0] + e0, pts[:, 1] + n0, inverse=True)
+        return np.stack([np.asarray(lon), np.asarray(lat)], axis=1)  # (n, 2)
+
+    return to_lonlat
+
+
+for _code, (_zone, _lat, _lon) in AV2_CITIES.items():
+    register_geo_frame(
+        GeoFrame(
+            _code,
+            f"Argoverse 2 city {_code}: UTM zone {_zone}N (WGS84) shifted to the city origin "
+            f"({_lat:.6f}, {_lon:.6f})",
+            _av2_converter(_zone, _lat, _lon),
+        )
+    )
+
+
+# ---------------------------------------------------------------------- nuScenes (bearing/distance)
+#: map location -> reference (latitude, longitude) of the map origin: nuscenes-devkit 1.2.0.
+NUSCENES_LOCATIONS: dict[str, tuple[float, float]] = {
+    "boston-seaport": (42.336849169438615, -71.05785369873047),
+    "singapore-onenorth": (1.2882100868743724, 103.78475189208984),
+    "singapore-hollandvillage": (1.2993652317780957, 103.78217697143555),
+    "singapore-queenstown": (1.2782562240223188, 103.76741409301758),
+}
+
+
+def _nuscenes_converter(lat0: float, lon0: float) -> Callable[[NDArray], NDArray]:
+    def to_lonlat(xy: NDArray[np.floating]) -> NDArray[np.float64]:
+        pts = _check_xy(xy)
+        lat, lon = math.radians(lat0), math.radians(lon0)
+        bearing = np.arctan2(pts[:, 0], pts[:, 1])  # (n,) clockwise from north
+        ang = np.hypot(pts[:, 0], pts[:, 1]) / NUSCENES_EARTH_RADIUS  # (n,) angular distance
+        tlat = np.arcsin(
+            math.sin(lat) * np.cos(ang) + math.cos(lat) * np.sin(ang) * np.cos(bearing)
+        )  # (n,)
+        tlon = lon + np.arctan2(
+            np.sin(bearing) * np.sin(ang) * math.cos(lat),
+            np.cos(ang) - math.sin(lat) * np.sin(tlat),
+        )  # (n,)
+        return np.stack([np.degrees(tlon), np.degrees(tlat)], axis=1)  # (n, 2)
+
+    return to_lonlat
+
+
+for _loc, (_lat, _lon) in NUSCENES_LOCATIONS.items():
+    register_geo_frame(
+        GeoFrame(
+            _loc,
+            f"nuScenes map {_loc}: origin ({_lat:.6f}, {_lon:.6f}), x east, y north, "
+            "spherical bearing/distance (nuscenes-devkit export_poses)",
+            _nuscenes_converter(_lat, _lon),
+        )
+    )
+
+
+# ---------------------------------------------------------------------- export
+def geojson_wgs84(gmap: GlobalMap, frame: str) -> dict[str, Any]:
+    """The global map as an RFC 7946 FeatureCollection in WGS84 (lon, lat) degrees: one feature
+    per instance (LineString, or Polygon for a crossing) with id, class and bookkeeping; the CRS
+    and the local frame are named in the foreign member ``icmapper``."""
+    from icmapper.data.types import CLASS_NAMES
+
+    gf = geo_frame(frame)
+    features = []
+    for i in gmap.ids().tolist():
+        cls, pts = gmap.get(int(i))
+        info = gmap.info(int(i))
+        ll = gf.to_lonlat(np.asarray(pts, np.float64))  # (n, 2)
+        coords = [[round(float(x), 9), round(float(y), 9)] for x, y in ll]
+        if int(cls) == 0:  # a crossing ring: closed, counter-clockwise exterior per RFC 7946
+            ring = coords + [coords[0]]
+            area2 = sum(a[0] * b[1] - b[0] * a[1] for a, b in zip(ring[:-1], ring[1:], strict=True))
+            if area2 < 0:
+                ring = ring[::-1]
+            geometry: dict[str, Any] = {"type": "Polygon", "coordinates": [ring]}
+        else:
+            geometry = {"type": "LineString", "coordinates": coords}
+        props: dict[str, Any] = {"id": int(i), "class": CLASS_NAMES[int(cls)]}
+        props.update({k: v for k, v in info.items() if k not in ("id", "cls")})
+        features.append(
+            {"type": "Feature", "id": int(i), "geometry": geometry, "properties": props}
+        )
+    return {
+        "type": "FeatureCollection",
+        "features": features,
+        "icmapper": {
+            "crs": "WGS84 longitude, latitude in degrees (RFC 7946; EPSG:4326 axis order lon, lat)",
+            "local_frame": frame,
+            "conversion": gf.describe,
+        },
+    }
+
+
+def write_geojson_wgs84(gmap: GlobalMap, frame: str, path: str | Path) -> None:
+    """Writes ``geojson_wgs84`` to ``path`` atomically (temp file in the folder + rename)."""
+    path = Path(path)
+    data = json.dumps(geojson_wgs84(gmap, frame))
+    fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as fh:
+            fh.write(data)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
