@@ -355,18 +355,38 @@ def _polyline_parts(
 def global_gt(seq: Sequence, rng: PerceptionRange) -> list[MapInstance]:
     """World instances clipped to the union of the patches (`rng` around every pose) the ego
     visited -> global GT instances in the world frame (see the module docstring for ids)."""
+    return visited_gt(seq.world, seq.poses, rng)
+
+
+def city_gt(seqs: list[Sequence], rng: PerceptionRange) -> list[MapInstance]:
+    """The ground truth of a city map built from several drives through one world: the world
+    instances clipped to the union of every patch visited by any drive (GlobalMapNet's
+    cross-scene protocol). ValueError when the drives do not share one world."""
+    if not seqs:
+        raise ValueError("city_gt: no drives")
+    names = {s.world.name for s in seqs}
+    if len(names) != 1:
+        raise ValueError(f"the drives of a city must share one world map, got {sorted(names)}")
+    poses = np.concatenate([np.asarray(s.poses, np.float64) for s in seqs])  # (sum T, 4, 4)
+    return visited_gt(seqs[0].world, poses, rng)
+
+
+def visited_gt(
+    world: WorldMap, poses: NDArray[np.float64], rng: PerceptionRange
+) -> list[MapInstance]:
+    """World instances clipped to the union of the patches (`rng` around every pose (T, 4, 4))."""
     from icmapper import geom
 
-    xyy = [pose_to_xy_yaw(p) for p in seq.poses]
+    xyy = [pose_to_xy_yaw(p) for p in poses]
     radius = float(np.hypot(rng.half_x, rng.half_y))
-    boxes = _boxes(seq.world)
+    boxes = _boxes(world)
     near: dict[int, list[int]] = {}
     for f, (x, y, _) in enumerate(xyy):
         for k in boxes.near(x, y, radius):
             near.setdefault(int(k), []).append(f)
     out: list[MapInstance] = []
     for k in sorted(near):
-        inst = seq.world.instances[k]
+        inst = world.instances[k]
         pieces = [p for f in near[k] for p in clip_pieces(inst, xyy[f], rng)]
         if not pieces:
             continue

@@ -5,6 +5,8 @@ and errors list the registry.
 
     sim:val            4 synthetic validation drives (cities of sim.CITY_SEEDS["val"])
     sim:<split>:N      N synthetic drives of split train / val / test
+    sim-city:<split>:INDEX:N
+                       N drives through one synthetic city (city INDEX of the split)
     av2:PATH[:split]   the drive of an Argoverse 2 log, or of every log in a folder of logs (a
                        split keeps the logs named in a split file: `split_file=` or
                        <PATH>/splits.json)
@@ -206,6 +208,21 @@ def _split_arg(spec: str, rest: str, o: SourceOptions) -> tuple[Path, str | None
     return root, split, split_file if split is not None else None
 
 
+def _open_sim_city(spec: str, rest: str, o: SourceOptions) -> list[Sequence]:
+    from icmapper.data import sim
+
+    parts = rest.split(":")
+    if len(parts) != 3 or parts[0] not in SIM_SPLITS:
+        raise ValueError(
+            f"bad source spec {spec!r}: expected sim-city:<{'|'.join(SIM_SPLITS)}>:INDEX:N"
+        )
+    try:
+        index = int(parts[1])
+    except ValueError:
+        raise ValueError(f"bad source spec {spec!r}: {parts[1]!r} is not a city index") from None
+    return sim.sim_city_drives(parts[0], index, _count(parts[2], spec), image_size=o.image_size)
+
+
 def _open_av2(spec: str, rest: str, o: SourceOptions) -> list[Sequence]:
     from icmapper.data import av2
     from icmapper.data.errors import DataError
@@ -260,6 +277,14 @@ def _open_nuscenes(spec: str, rest: str, o: SourceOptions) -> list[Sequence]:
 
 register_source(
     SourceKind("sim", "sim:<split>[:N]", "N synthetic drives (split train|val|test)", _open_sim)
+)
+register_source(
+    SourceKind(
+        "sim-city",
+        "sim-city:<split>:INDEX:N",
+        "N drives through one synthetic city (city INDEX of the split): a city run",
+        _open_sim_city,
+    )
 )
 register_source(
     SourceKind(

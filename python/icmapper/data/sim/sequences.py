@@ -65,3 +65,28 @@ def sim_sequences(
             worlds[city] = generate_city(city)
         out.append(sim_sequence(city, k, image_size, world=worlds[city]))
     return out
+
+
+def sim_city_drives(
+    split: str, index: int, num: int, image_size: tuple[int, int] = (128, 352)
+) -> list[Sequence]:
+    """`num` drives through ONE synthetic city: city ``CITY_SEEDS[split][index]``, drive seeds
+    0..num-1 (random start lanes, turns and lengths along the same lane graph, so routes overlap
+    and cross each other in both directions), each starting at its own time of day (timestamps
+    offset by a seeded start in [0, 12 h)). Named "sim-<city>-<k>"; all share one WorldMap."""
+    if split not in CITY_SEEDS:
+        raise ValueError(f"unknown split {split!r}; expected one of {sorted(CITY_SEEDS)}")
+    cities = CITY_SEEDS[split]
+    if not 0 <= index < len(cities):
+        raise ValueError(f"city index {index} out of range for split {split!r} ({len(cities)})")
+    if num < 1:
+        raise ValueError(f"num must be >= 1, got {num}")
+    city = cities[index]
+    world = generate_city(city)
+    out = []
+    for k in range(num):
+        seq = sim_sequence(city, k, image_size, world=world)
+        start = float(np.random.default_rng([city, k, 0x57A]).uniform(0.0, 12 * 3600.0))
+        seq.timestamps = seq.timestamps + round(start, 1)  # (T,) seconds of the day
+        out.append(seq)
+    return out
