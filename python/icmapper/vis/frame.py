@@ -7,7 +7,7 @@ predictions projected onto the ground through the frame's camera geometry (``vis
 coloured by class and labelled by track id; a bird's-eye panel around the ego (x forward up, y
 left to the left) with the frame's ground truth (wide pale bands), the global map so far (thin)
 and the predictions (after fusion: the points the run stores, labelled by track id; those the
-method did not track are thin, pale, unlabelled and left out of the cameras); and an overview
+method did not track are only counted in the header, the viewer draws them); and an overview
 of the whole drive with the map so far, the path driven and the path ahead. See ``vis.replay``
 for what "the map so far" is.
 
@@ -25,7 +25,12 @@ from numpy.typing import NDArray
 from PIL import Image, ImageDraw
 
 from icmapper.data.types import CLASS_NAMES, PerceptionRange, world_to_ego
-from icmapper.vis.overlay import Overlay, draw_camera_overlays, draw_label
+from icmapper.vis.overlay import (
+    Overlay,
+    draw_camera_overlays,
+    middle_out,
+    place_labels,
+)
 from icmapper.vis.replay import FrameView, MapItem, RunReplay
 from icmapper.vis.style import (
     BACKGROUND_RGB,
@@ -173,18 +178,17 @@ def bev_panel(view: FrameView, rng: PerceptionRange, height: int) -> Image.Image
     p = view.predictions
     labels = []
     for cls, pts, tid in zip(p.classes.tolist(), p.points, p.track_ids.tolist(), strict=True):
-        if is_tracked(tid):
-            cv.line(pts, CLASS_RGB[cls], 2, cls == 0)
-            cv.dots(pts, CLASS_RGB[cls], 1.4)
-            mid = np.asarray(pts[len(pts) // 2], np.float64)[None]
-            labels.append((cv.to_px(mid)[0] / _SS, str(tid), CLASS_RGB[cls]))
-        else:
-            cv.line(pts, tint(CLASS_RGB[cls], 0.6), 1, cls == 0)
+        if not is_tracked(tid):
+            continue  # counted in the header; the viewer draws them (dashed)
+        cv.line(pts, (255, 255, 255), 4.5, cls == 0)  # a halo: predictions over the map
+        cv.line(pts, CLASS_RGB[cls], 2.2, cls == 0)
+        cv.dots(pts, CLASS_RGB[cls], 1.5)
+        places = middle_out(cv.to_px(np.asarray(pts, np.float64)) / _SS)
+        labels.append((places, str(tid), CLASS_RGB[cls]))
     cv.polygon(_ego_box(), EGO_RGB, EGO_RGB)
     img = cv.image()
     d = ImageDraw.Draw(img)
-    for (x, y), text, rgb in labels:
-        draw_label(d, (float(x), float(y)), text, rgb, 10)
+    place_labels(d, labels, 10)
     out = Image.new("RGB", (width, height), (255, 255, 255))
     out.paste(img, (0, _TITLE))
     _title(out, f"BEV, ego frame ({rng.name} m range)")

@@ -121,10 +121,11 @@ def project_polyline(
     return out
 
 
-def _label_anchor(
-    piece_list: list[NDArray[np.float64]], size: tuple[int, int], margin: int = 8
-) -> tuple[float, float] | None:
-    """The middle vertex of the part of the pieces inside the image (less a margin)."""
+def label_candidates(
+    piece_list: list[NDArray[np.float64]], size: tuple[int, int], margin: int = 8, k: int = 7
+) -> list[tuple[float, float]]:
+    """Up to ``k`` places for a label on the part of the pieces inside the image (less a
+    margin), the middle first, then alternately farther out."""
     h, w = size
     inside = [
         p[
@@ -135,11 +136,23 @@ def _label_anchor(
         ]
         for p in piece_list
     ]
-    pts = np.concatenate(inside) if inside else np.zeros((0, 2))  # (k, 2)
-    if pts.shape[0] == 0:
-        return None
-    c = pts[pts.shape[0] // 2]
-    return float(c[0]), float(c[1])
+    pts = np.concatenate(inside) if inside else np.zeros((0, 2))  # (m, 2)
+    return middle_out(pts, k)
+
+
+def middle_out(pts: NDArray[np.floating], k: int = 7) -> list[tuple[float, float]]:
+    """Up to ``k`` of the points (m, 2): the middle one, then alternately towards both ends."""
+    m = int(pts.shape[0])
+    if m == 0:
+        return []
+    mid = m // 2
+    step = max(1, m // (k + 1))
+    order = [mid]
+    for j in range(1, k):
+        off = (j + 1) // 2 * step * (1 if j % 2 else -1)
+        if 0 <= mid + off < m:
+            order.append(mid + off)
+    return [(float(pts[i, 0]), float(pts[i, 1])) for i in order]
 
 
 def draw_label(
@@ -157,6 +170,33 @@ def draw_label(
     draw.rectangle(box, fill=(255, 255, 255), outline=rgb)
     draw.text((box[0] + 2 - x0, box[1] + 2 - y0), text, fill=rgb, font=f)
     return box
+
+
+def _overlaps(a: tuple[float, ...], b: tuple[float, ...]) -> bool:
+    return a[0] < b[2] and b[0] < a[2] and a[1] < b[3] and b[1] < a[3]
+
+
+def place_labels(
+    draw: ImageDraw.ImageDraw,
+    labels: list[tuple[list[tuple[float, float]], str, tuple[int, int, int]]],
+    size: int,
+) -> None:
+    """Draws each label (candidate places, text, colour) at its first place that does not
+    overlap a label already drawn (the first place when all overlap)."""
+    f = font(size)
+    boxes: list[tuple[float, float, float, float]] = []
+    for places, text, rgb in labels:
+        if not places:
+            continue
+        x0, y0, x1, y1 = draw.textbbox((0, 0), text, font=f)
+        hw, hh = (x1 - x0) / 2 + 2, (y1 - y0) / 2 + 2
+        pick = places[0]
+        for x, y in places:
+            box = (x - hw, y - hh, x + hw, y + hh)
+            if not any(_overlaps(box, b) for b in boxes):
+                pick = (x, y)
+                break
+        boxes.append(draw_label(draw, pick, text, rgb, size))
 
 
 def draw_camera_overlays(
@@ -181,10 +221,7 @@ def draw_camera_overlays(
             for p in pieces:
                 draw.line([tuple(q) for q in p.tolist()], fill=rgb, width=ov.width, joint="curve")
             if ov.label is not None:
-                anchor = _label_anchor(pieces, (h, w))
-                if anchor is not None:
-                    labels.append((anchor, ov.label, rgb))
-        for anchor, text, rgb in labels:  # labels above every line
-            draw_label(draw, anchor, text, rgb, label_size)
+                labels.append((label_candidates(pieces, (h, w)), ov.label, rgb))
+        place_labels(draw, labels, label_size)  # above every line
         out.append(im)
     return out

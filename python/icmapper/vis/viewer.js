@@ -531,7 +531,7 @@
   function showFrame() {
     const t = state.frame;
     slider.value = String(t);
-    const time = D.frames.time ? "  t = " + D.frames.time[t].toFixed(1) + " s" : "";
+    const time = D.frames.time ? " · t = " + D.frames.time[t].toFixed(1) + " s" : "";
     $("framelabel").textContent = "frame " + t + " / " + (T - 1) + time;
     if (D.cameras) D.cameras.frames[t].forEach((src, k) => { camImgs[k].src = src; });
     const fIdx = frameIndex[t];
