@@ -85,7 +85,7 @@ def _write_ffmpeg(frames: Iterable[Image.Image], path: str, fps: float) -> int:
     size = None
     with imageio.get_writer(
         path, format="FFMPEG", mode="I", fps=fps, codec="libx264", pixelformat="yuv420p",
-        quality=8, macro_block_size=1, ffmpeg_log_level="error",
+        quality=5, macro_block_size=1, ffmpeg_log_level="error",
     ) as writer:  # fmt: skip
         for img in frames:
             img = _pad_even(img.convert("RGB"))
