@@ -4,5 +4,22 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh
+# The viewer's browser test drives the system's Chromium (Playwright's own browser download is not
+# used): install Debian's package where this user may (root or passwordless sudo, apt-get present);
+# elsewhere the test skips and says why. ICMAPPER_CHROMIUM=PATH points the test at another build.
+if ! command -v chromium >/dev/null 2>&1 && ! command -v chromium-browser >/dev/null 2>&1 \
+    && [ -z "${ICMAPPER_CHROMIUM:-}" ] && command -v apt-get >/dev/null 2>&1; then
+    SUDO=""
+    if [ "$(id -u)" -ne 0 ]; then
+        if command -v sudo >/dev/null 2>&1 && sudo -n true 2>/dev/null; then SUDO="sudo -n"; fi
+    fi
+    if [ "$(id -u)" -eq 0 ] || [ -n "$SUDO" ]; then
+        { $SUDO apt-get update -qq \
+            && DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq chromium >/dev/null; } \
+            || echo "note: could not install chromium; the viewer's browser test will skip" >&2
+    else
+        echo "note: no chromium and no permission to install it; the browser test will skip" >&2
+    fi
+fi
 cargo test --workspace --exclude icmap-py --release
 .venv/bin/python -m pytest -q "$@"

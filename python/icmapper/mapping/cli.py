@@ -70,14 +70,13 @@ def run_methods(
     """Runs ``methods`` on the sequences of ``source``, all under one ``config``; one run folder
     per method under ``out`` (with the config it ran with: ``mapper_config.json``). Returns the
     run folders."""
-    from tqdm import tqdm
-
     from icmapper.data import gt as gt_mod
     from icmapper.eval.runfmt import RunWriter
     from icmapper.georef import GEO_FRAMES, write_geojson_wgs84
     from icmapper.mapping.config import MapperConfig
     from icmapper.mapping.plot import plot_global_maps
     from icmapper.mapping.run import DetectionInput, map_sequence, method_factory
+    from icmapper.progress import progress as progress_bar
 
     inp = DetectionInput.parse(detections, checkpoint, device, seed)
     rng = _range_of(inp)
@@ -95,7 +94,7 @@ def run_methods(
         writers[m] = RunWriter(d, m, source, rng)
         run_dirs.append(d)
     total = sum(len(s) for s in seqs) * len(methods)
-    bar = tqdm(total=total, desc=f"mapping {source}", unit="frame", disable=not progress)
+    bar = progress_bar(total, f"mapping {source}", unit="frame", enabled=progress)
     timings: dict[str, float] = {m: 0.0 for m in methods}
     for seq in seqs:
         records = None

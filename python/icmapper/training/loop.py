@@ -240,9 +240,9 @@ def train(
         log = MetricsLog(out / f"stage{stage}_metrics.csv", out / "tb")
     bar = None
     if progress and info.is_main:
-        from tqdm import tqdm
+        from icmapper.progress import progress as progress_bar
 
-        bar = tqdm(total=total, initial=start, desc=f"stage {stage}", dynamic_ncols=True)
+        bar = progress_bar(total, f"stage {stage}", unit="step", initial=start)
     sums: dict[str, float] = {}
     count = 0
     last: dict[str, float] = {}

@@ -1,0 +1,152 @@
+"""`icmapper vis` (per-frame pictures and a video of a run) and `icmapper view` (the interactive
+HTML viewer of a run folder or a map file). Both only read: the run folder, its source (images and
+ground truth, recomputed) and the map files."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+from typing import Any
+
+from icmapper.vis.replay import PICTURE_IMAGE_SIZE
+
+#: Camera thumbnail size (H, W) in the viewer.
+THUMB_SIZE = (64, 176)
+
+
+def _size(text: list[int] | tuple[int, int]) -> tuple[int, int]:
+    h, w = (int(v) for v in text)
+    if h < 16 or w < 16:
+        raise ValueError(f"--image-size must be at least 16 16, got {h} {w}")
+    return h, w
+
+
+def _frames(args: argparse.Namespace, n: int) -> list[int]:
+    if not args.frame:
+        return list(range(n))
+    bad = [f for f in args.frame if not 0 <= f < n]
+    if bad:
+        raise ValueError(f"--frame {bad[0]}: the sequence has frames 0-{n - 1}")
+    return list(args.frame)
+
+
+def cmd_vis(args: argparse.Namespace) -> int:
+    from icmapper.progress import progress
+    from icmapper.vis.frame import frame_picture, overview_bounds, write_png
+    from icmapper.vis.replay import open_replay
+    from icmapper.vis.video import write_video
+
+    replay = open_replay(
+        args.run, args.sequence, _size(args.image_size), with_source=not args.no_source
+    )
+    frames = _frames(args, len(replay))
+    bounds = overview_bounds(replay)
+    out_dir = Path(args.out) if args.out else replay.run.path / "vis" / replay.name
+    written: list[Path] = []
+    pngs = not args.video or bool(args.frame)
+
+    def pictures() -> Any:
+        bar = progress(len(frames), f"pictures {replay.name}", unit="frame")
+        for t in frames:
+            img = frame_picture(replay, t, bounds)
+            if pngs:
+                written.append(write_png(img, out_dir / f"frame_{t:04d}.png"))
+            bar.update(1)
+            yield img
+        bar.close()
+
+    if args.video:
+        path = write_video(pictures(), args.video, fps=args.fps)
+        print(f"wrote {path} ({len(frames)} frames at {args.fps:g} fps)")
+    else:
+        for _ in pictures():
+            pass
+    if written:
+        where = written[0] if len(written) == 1 else f"{len(written)} pictures in {out_dir}"
+        print(f"wrote {where}")
+    return 0
+
+
+def cmd_view(args: argparse.Namespace) -> int:
+    from icmapper.vis.replay import load_map_items, open_replay
+    from icmapper.vis.viewer import map_viewer_data, viewer_data, write_viewer
+
+    path = Path(args.path)
+    if path.is_file() and path.suffix == ".icmap":
+        data = map_viewer_data(load_map_items(path), f"map {path.name}")
+        out = Path(args.out) if args.out else path.with_suffix(".html")
+    elif path.is_dir() and (path / "run.json").is_file():
+        replay = open_replay(
+            path,
+            args.sequence,
+            _size(args.thumb_size),
+            with_source=not args.no_source,
+            render=not args.no_thumbnails,
+        )
+        data = viewer_data(replay, thumbnails=not args.no_thumbnails)
+        out = Path(args.out) if args.out else path / f"view-{replay.name}.html"
+    elif path.is_dir():
+        raise ValueError(f"{path} is not a run folder (no run.json in it)")
+    else:
+        raise ValueError(f"{path}: expected a run folder or a .icmap map file")
+    write_viewer(data, out)
+    size = out.stat().st_size / 1e6
+    print(f"wrote {out} ({len(data['map']['id'])} map instances, {size:.1f} MB, works offline)")
+    return 0
+
+
+def register(subparsers: Any) -> None:
+    """Adds the `vis` and `view` sub-commands."""
+    p = subparsers.add_parser(
+        "vis",
+        help="per-frame pictures (cameras with predictions, BEV, map so far) and a video of a run",
+        description="Draws frames of one sequence of a run folder: the camera images with the "
+        "frame's predictions projected through the cameras' geometry (class colours, track ids), "
+        "a BEV panel with ground truth, the map so far and the predictions, and an overview of "
+        "the drive. Images and ground truth are recomputed from the run's source spec. Without "
+        "--frame every frame is drawn; --video writes them as an MP4 (imageio-ffmpeg) or a GIF.",
+    )
+    p.add_argument("run", metavar="RUN_DIR", help="a run folder (icmapper map / compare)")
+    p.add_argument("--sequence", help="sequence name or position in the run (default: first)")
+    p.add_argument(
+        "--frame", type=int, action="append", metavar="N", help="frame to draw (repeatable)"
+    )
+    p.add_argument("--out", help="folder of the PNGs (default RUN_DIR/vis/SEQUENCE)")
+    p.add_argument("--video", metavar="PATH", help="write a video (.mp4, or .gif) of the frames")
+    p.add_argument("--fps", type=float, default=2.0, help="video frames per second (default 2)")
+    p.add_argument(
+        "--image-size",
+        type=int,
+        nargs=2,
+        default=PICTURE_IMAGE_SIZE,
+        metavar=("H", "W"),
+        help="camera image size in the picture (default %(default)s)",
+    )
+    p.add_argument("--no-source", action="store_true", help="do not open the source: no "
+                   "images or ground truth, predictions and map only")  # fmt: skip
+    p.set_defaults(func=cmd_vis)
+
+    v = subparsers.add_parser(
+        "view",
+        help="write an interactive, self-contained HTML viewer of a run or a map file",
+        description="Writes one HTML file (data and code inline, no network) to scrub through a "
+        "run: pan and zoom the global map, toggle classes, ground truth and predictions, move the "
+        "time slider, click an instance for its id, class, observations, first/last frame and "
+        "Chamfer distance to the nearest ground truth; per-class CD and GAP. A .icmap file alone "
+        "gives the map with its bookkeeping frames.",
+    )
+    v.add_argument("path", metavar="RUN_DIR|MAP.icmap", help="a run folder or a native map file")
+    v.add_argument("--sequence", help="sequence name or position in the run (default: first)")
+    v.add_argument("--out", help="HTML path (default RUN_DIR/view-SEQUENCE.html, MAP.html)")
+    v.add_argument("--no-thumbnails", action="store_true", help="leave out the camera images")
+    v.add_argument(
+        "--thumb-size",
+        type=int,
+        nargs=2,
+        default=THUMB_SIZE,
+        metavar=("H", "W"),
+        help="camera thumbnail size (default %(default)s)",
+    )
+    v.add_argument("--no-source", action="store_true", help="do not open the source: no "
+                   "images, ground truth or metrics")  # fmt: skip
+    v.set_defaults(func=cmd_view)
