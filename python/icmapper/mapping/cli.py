@@ -79,7 +79,7 @@ def run_methods(
     from icmapper.progress import progress as progress_bar
 
     inp = DetectionInput.parse(detections, checkpoint, device, seed)
-    rng = _range_of(inp)
+    rng = range_of_detections(inp)
     seqs = _open(source, image_size, seed, render=inp.needs_images)
     if not seqs:
         raise ValueError(f"source {source!r} has no sequences")
@@ -136,7 +136,8 @@ def _write_json_atomic(path: Path, data: Any) -> None:
     os.replace(tmp, path)
 
 
-def _range_of(inp: Any) -> Any:
+def range_of_detections(inp: Any) -> Any:
+    """The perception range of a run: the checkpoint's with the learned detector, else 60x30."""
     from icmapper.data.types import RANGE_60x30
 
     if inp.checkpoint:

@@ -178,12 +178,19 @@ def unique_track_ids(ids: NDArray[np.int64], start: int) -> tuple[NDArray[np.int
 
 
 def map_sequence(
-    method: MappingMethod, seq: Sequence, with_images: bool, progress: Any = None
+    method: MappingMethod,
+    seq: Sequence,
+    with_images: bool,
+    progress: Any = None,
+    reset: bool = True,
 ) -> tuple[list[Any], Any]:
-    """Runs one method over one sequence: (per-frame FramePredictions, global map)."""
+    """Runs one method over one sequence: (per-frame FramePredictions, global map).
+    ``reset=False`` continues the method's current state (a city map continued drive after
+    drive: the caller resets it and loads the map first)."""
     from icmapper.eval.runfmt import FramePredictions
 
-    method.reset()
+    if reset:
+        method.reset()
     frames = []
     fresh = 1 << 50
     for i in range(len(seq)):

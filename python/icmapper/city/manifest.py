@@ -1,0 +1,105 @@
+"""The city run folder and its manifest ``city.json``.
+
+Layout of a city run ``CITY/``::
+
+    city.json            this manifest (format "icmapper-city", version 1)
+    city.icmap           the city map (native engine file; provenance: the drives of each instance)
+    city.geojson         the city map in the local map frame (+ city.wgs84.geojson where located)
+    city.png             the city map beside the cross-drive ground truth
+    drives/<k>-<name>/   one standard run folder per drive (run.json, <name>.npz, <name>.icmap)
+
+The manifest records how the city was built (method, detections, checkpoint, perception range,
+mode, the ``MapperConfig``, the merge settings) and every drive: its source spec and sequence
+name, its run folder, whether it succeeded (a failed drive keeps its error and is left out of the
+city map). A city run is extended by running more drives into the same folder: drives already
+listed are not mapped again. Written atomically.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+FORMAT = "icmapper-city"
+VERSION = 1
+MANIFEST = "city.json"
+CITY_MAP = "city.icmap"
+
+#: How a city map is built: "merge" (every drive mapped alone, then the drive maps merged) or
+#: "continue" (one mapper continues the city map drive after drive, with re-identification).
+MODES = ("merge", "continue")
+
+
+@dataclass
+class DriveEntry:
+    """One drive of a city run: ``index`` (its drive id in the map's provenance), the source
+    ``spec`` and the ``sequence`` name in it, the run folder (relative to the city folder),
+    ``status`` "ok" or "failed" (then ``error``), frames and seconds."""
+
+    index: int
+    spec: str
+    sequence: str
+    run: str
+    status: str = "ok"
+    error: str = ""
+    frames: int = 0
+    seconds: float = 0.0
+
+
+@dataclass
+class CityManifest:
+    method: str
+    detections: str
+    checkpoint: str | None
+    range_name: str
+    mode: str
+    mapper_config: dict[str, Any]
+    drives: list[DriveEntry] = field(default_factory=list)
+    format: str = FORMAT
+    version: int = VERSION
+
+    def ok_drives(self) -> list[DriveEntry]:
+        return [d for d in self.drives if d.status == "ok"]
+
+    def next_index(self) -> int:
+        return max((d.index for d in self.drives), default=-1) + 1
+
+
+def is_city_run(path: str | os.PathLike) -> bool:
+    return (Path(path) / MANIFEST).is_file()
+
+
+def read_manifest(city: str | os.PathLike) -> CityManifest:
+    """The manifest of a city folder (ValueError naming the file when it is not one)."""
+    path = Path(city) / MANIFEST
+    try:
+        raw = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError) as exc:
+        raise ValueError(f"{path}: not a readable city manifest ({exc})") from None
+    if not isinstance(raw, dict) or raw.get("format") != FORMAT:
+        raise ValueError(f"{path}: not an icmapper city manifest")
+    if raw.get("version") != VERSION:
+        raise ValueError(f"{path}: version {raw.get('version')}, this build reads {VERSION}")
+    try:
+        drives = [DriveEntry(**d) for d in raw.pop("drives")]
+        return CityManifest(drives=drives, **raw)
+    except (TypeError, KeyError) as exc:
+        raise ValueError(f"{path}: malformed manifest ({exc})") from None
+
+
+def write_manifest(city: str | os.PathLike, manifest: CityManifest) -> None:
+    """Writes ``city.json`` atomically (temp file in the folder + rename)."""
+    path = Path(city) / MANIFEST
+    data = json.dumps(asdict(manifest), indent=1)
+    fd, tmp = tempfile.mkstemp(prefix=MANIFEST + ".", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as fh:
+            fh.write(data)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
