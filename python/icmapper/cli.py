@@ -20,6 +20,7 @@ _COMMAND_MODULES = (
     "icmapper.training.cli",  # train
     "icmapper.mapping.cli",  # map, compare
     "icmapper.eval.cli",  # eval
+    "icmapper.formats.cli",  # export
 )
 
 BENCH_MOVED = (
