@@ -37,6 +37,7 @@ from icmapper.formats.types import (
     PredictionSet,
     class_index,
     frame_arrays,
+    frame_name,
     instance_points,
 )
 
@@ -69,8 +70,7 @@ def _frame(raw: Any, t: int, path: str) -> PredictedFrame:
         raise PredictionFileError(f"{where}: a frame needs a 'token' or a 'timestamp'")
     if ts is not None and not np.isfinite(ts):
         raise PredictionFileError(f"{where}: timestamp is not finite")
-    if seq is not None or token is not None or ts is not None:
-        where = f"{path}: frame {t} ({PredictedFrame(token, ts, seq, *_EMPTY).name()})"
+    where = f"{path}: frame {t} ({frame_name(seq, token, ts)})"
     pose = None
     if "pose" in raw:
         try:
@@ -106,9 +106,6 @@ def _frame(raw: Any, t: int, path: str) -> PredictedFrame:
         if queries.ndim != 2 or not np.all(np.isfinite(queries)):
             raise PredictionFileError(f"{where}: queries must be finite lists of equal length")
     return PredictedFrame(token, ts, seq, cls, sc, pts, pose, track_ids, queries)
-
-
-_EMPTY = (np.zeros(0, np.int64), np.zeros(0, np.float32), np.zeros((0, 20, 2), np.float32))
 
 
 def read(path: str, data: Any, range_name: str | None) -> PredictionSet:

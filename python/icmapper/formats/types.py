@@ -49,14 +49,19 @@ class PredictedFrame:
 
     def name(self) -> str:
         """How error messages name this frame."""
-        parts = []
-        if self.sequence is not None:
-            parts.append(f"sequence {self.sequence!r}")
-        if self.token is not None:
-            parts.append(f"token {self.token!r}")
-        if self.timestamp is not None:
-            parts.append(f"timestamp {self.timestamp!r}")
-        return ", ".join(parts) or "an unnamed frame"
+        return frame_name(self.sequence, self.token, self.timestamp)
+
+
+def frame_name(sequence: str | None, token: str | None, timestamp: float | None) -> str:
+    """ "sequence 'a', token 'b', timestamp 1.5" (the parts that are given)."""
+    parts = []
+    if sequence is not None:
+        parts.append(f"sequence {sequence!r}")
+    if token is not None:
+        parts.append(f"token {token!r}")
+    if timestamp is not None:
+        parts.append(f"timestamp {timestamp!r}")
+    return ", ".join(parts) or "an unnamed frame"
 
 
 @dataclass
