@@ -87,19 +87,15 @@ def read(path: str, data: Any, range_name: str | None) -> PredictionSet:
 
 
 def closed_ring(points: np.ndarray) -> np.ndarray:
-    """A crossing (20, 2) ring -> 20 points evenly spaced along the closed contour, the last
-    repeating the first (StreamMapNet's ``interp_fixed_num`` of a closed LineString)."""
-    from icmapper import geom
-
-    ring = np.concatenate([points, points[:1]]).astype(np.float64)  # (21, 2)
-    if not np.any(ring[1:] != ring[:-1]):
-        return np.repeat(ring[:1], points.shape[0], axis=0)
-    return geom.resample(ring, points.shape[0], False)  # (20, 2)
+    """A crossing (n, 2) ring -> (n + 1, 2) closed ring, the first point repeated at the end:
+    the closed LineString their tools interpolate along (their evaluators take vectors of any
+    length), and read back exactly."""
+    return np.concatenate([points, points[:1]]).astype(np.float64)
 
 
 def write(path: Path, preds: PredictionSet) -> None:
     """Writes ``preds`` as a submission file: one entry per frame token (every frame needs one);
-    crossings as closed rings (``closed_ring``)."""
+    crossings as closed rings of 21 points (``closed_ring``)."""
     results: dict[str, Any] = {}
     for f in preds.frames:
         if f.token is None:
