@@ -10,10 +10,11 @@ import math
 import numpy as np
 import pytest
 from icmapper import geom
-from icmapper.eval.bench import make_workload, reference_ap
 from icmapper.eval.detection import CLASS_NAMES, THRESHOLDS
 from icmapper.eval.evaluate import _gt_table, _pred_table, evaluate
 from icmapper.eval.runfmt import FramePredictions
+
+from benchmarks.evaluation import make_workload, reference_ap
 
 TH = THRESHOLDS["60x30"]
 
