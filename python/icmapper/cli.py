@@ -21,6 +21,7 @@ _COMMAND_MODULES = (
     "icmapper.mapping.cli",  # map, compare
     "icmapper.eval.cli",  # eval
     "icmapper.vis.cli",  # vis, view
+    "icmapper.formats.cli",  # export
 )
 
 BENCH_MOVED = (

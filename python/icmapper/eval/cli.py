@@ -43,11 +43,20 @@ def write_json(path: str | os.PathLike, results: list[dict]) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from icmapper.eval.evaluate import evaluate_run
+    from icmapper.eval.evaluate import evaluate_predictions, evaluate_run
     from icmapper.eval.report import markdown
 
-    results = [evaluate_run(d, score_threshold=args.score_threshold) for d in args.runs]
-    print(markdown(results), end="")
+    mt = args.cmap in ("maptracker", "both")
+    results = []
+    for d in args.runs:
+        if d.startswith("file:"):
+            if not args.source:
+                raise ValueError(f"{d}: evaluating a prediction file needs --source SPEC")
+            r = evaluate_predictions(d, args.source, args.score_threshold, maptracker=mt)
+        else:
+            r = evaluate_run(d, score_threshold=args.score_threshold, maptracker=mt)
+        results.append(r)
+    print(markdown(results, cmap=args.cmap), end="")
     if args.json:
         write_json(args.json, results)
     return 0
@@ -61,7 +70,20 @@ def register(subparsers: Any) -> None:
         description="Evaluates run folders against ground truth recomputed from their source and "
         "prints markdown tables (one row per run); see docs/eval.md.",
     )
-    p.add_argument("runs", nargs="+", metavar="RUN_DIR", help="run folder(s)")
+    p.add_argument(
+        "runs",
+        nargs="+",
+        metavar="RUN_DIR",
+        help="run folder(s), or prediction files as file:PATH[:FORMAT][:RANGE] (with --source)",
+    )
+    p.add_argument("--source", help="the source spec prediction files are evaluated on")
+    p.add_argument(
+        "--cmap",
+        choices=("icmapper", "maptracker", "both"),
+        default="icmapper",
+        help="C-mAP definition in Table 1: icmapper's (the method's track ids, default), "
+        "MapTracker's (ids re-derived from the predictions, score > 0.4; docs/eval.md) or both",
+    )
     p.add_argument("--json", metavar="PATH", help="also write the numbers as JSON")
     p.add_argument(
         "--score-threshold",

@@ -107,6 +107,7 @@ def evaluate(
     range_name: str = "60x30",
     score_threshold: float = DEFAULT_SCORE_THRESHOLD,
     gate: float | None = None,
+    maptracker: bool = False,
 ) -> dict:
     """All metrics of one method at one perception range.
 
@@ -115,6 +116,8 @@ def evaluate(
     global_pred[s]: the predicted global map as (cls, points (n, 2) world, closed, score) tuples
     (or None when the sequence has none); global_gt[s]: GT global instances (MapInstance or
     (cls, points, closed)). Mapping metrics are computed when every sequence has both.
+    maptracker: also MapTracker's C-mAP (``consistency_maptracker``; needs every frame's pose),
+    under the result key "consistency_maptracker".
     Returns the result dict (docs/eval.md, "JSON keys").
     """
     if range_name not in THRESHOLDS:
@@ -146,6 +149,14 @@ def evaluate(
         "tracking": trk,
         "mapping": None,
     }
+    if maptracker:
+        from icmapper.data.types import PerceptionRange
+        from icmapper.eval.consistency_maptracker import maptracker_cmap
+
+        rng = PerceptionRange.from_name(range_name)
+        result["consistency_maptracker"] = maptracker_cmap(
+            predictions_per_seq, gt_per_seq, thresholds, (rng.half_x, rng.half_y)
+        )
     if global_pred is not None and global_gt is not None:
         if all(g is not None for g in global_pred):
             gp = [_as_global(g, scored=True) for g in global_pred]  # type: ignore[arg-type]
@@ -189,11 +200,13 @@ def evaluate_run(
     run_dir: str | os.PathLike,
     score_threshold: float = DEFAULT_SCORE_THRESHOLD,
     sources: Seq[Any] | None = None,
+    maptracker: bool = False,
 ) -> dict:
     """Reads a run folder, recomputes ground truth from its source spec and evaluates it.
 
     sources: the source's sequences when already opened (else ``open_source(run.source)``).
     Mapping metrics need every sequence's global map file and the engine to read it.
+    maptracker: also MapTracker's C-mAP (see ``evaluate``).
     """
     from icmapper.data import gt as gt_mod
     from icmapper.data.types import PerceptionRange
@@ -212,8 +225,68 @@ def evaluate_run(
     if have_maps and run.sequences:
         global_pred = [load_global_map(rs.global_map_path) for rs in run.sequences]  # type: ignore[arg-type]
         global_gt = [gt_mod.global_gt(seq, rng) for seq in seqs]
-    result = evaluate(preds, gts, global_pred, global_gt, run.range_name, score_threshold)
+    result = evaluate(
+        preds, gts, global_pred, global_gt, run.range_name, score_threshold, maptracker=maptracker
+    )
     result["method"] = run.method
     result["run"] = str(run.path)
     result["source"] = run.source
+    return result
+
+
+def evaluate_predictions(
+    detections: str,
+    source: str,
+    score_threshold: float = DEFAULT_SCORE_THRESHOLD,
+    sources: Seq[Any] | None = None,
+    maptracker: bool = False,
+) -> dict:
+    """Evaluates a prediction file (``--detections file:PATH[:FORMAT][:RANGE]`` syntax) on the
+    sequences of ``source`` like a run without global maps: per-frame metrics only. Track ids are
+    the file's where it has them; otherwise every prediction gets its own id (tracking and
+    icmapper's C-mAP then say nothing; MapTracker's C-mAP re-derives ids).
+    """
+    from icmapper.data import gt as gt_mod
+    from icmapper.formats.source import PredictionInput
+    from icmapper.mapping.run import DetectionInput, unique_track_ids
+
+    if not detections.startswith("file:"):
+        raise ValueError(f"expected file:PATH[:FORMAT][:RANGE], got {detections!r}")
+    inp = DetectionInput.parse(detections, None)
+    preds = inp.predictions
+    from icmapper.data.types import PerceptionRange
+
+    rng = PerceptionRange.from_name(preds.range_name)
+    if sources is None:
+        from icmapper.data.sources import open_source
+
+        sources = open_source(source, render=False)
+    seqs = list(sources)
+    matched = PredictionInput(preds, source, seqs)
+    per_seq = []
+    fresh = 1 << 50
+    for seq in seqs:
+        frames = []
+        for t, f in enumerate(matched.frames(seq)):
+            ids = f.track_ids if f.track_ids is not None else np.full(len(f), -1, np.int64)
+            ids, fresh = unique_track_ids(ids, fresh)
+            frames.append(
+                FramePredictions(
+                    t,
+                    np.asarray(seq.poses[t], np.float64),
+                    f.classes,
+                    f.scores.astype(np.float64),
+                    f.points,
+                    ids,
+                    float(seq.timestamps[t]),
+                )  # fmt: skip
+            )
+        per_seq.append(frames)
+    gts = [gt_mod.sequence_gt(seq, rng) for seq in seqs]
+    result = evaluate(
+        per_seq, gts, None, None, preds.range_name, score_threshold, maptracker=maptracker
+    )
+    result["method"] = f"{preds.format}:{os.path.basename(preds.path)}"
+    result["run"] = preds.path
+    result["source"] = source
     return result

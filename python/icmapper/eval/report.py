@@ -34,16 +34,25 @@ def _name(r: dict) -> str:
     return str(r.get("method") or r.get("run") or "run")
 
 
-def detection_table(results: Sequence[dict]) -> str:
-    header = ["Method", "Range", *(f"AP_{_SHORT[c]}" for c in CLASS_NAMES), "mAP", "C-mAP"]
+def detection_table(results: Sequence[dict], cmap: str = "icmapper") -> str:
+    """cmap: which C-mAP columns — "icmapper" (C-mAP), "maptracker" (C-mAP (MT): MapTracker's
+    definition, with its mAP beside it, mAP (MT)) or "both"."""
+    header = ["Method", "Range", *(f"AP_{_SHORT[c]}" for c in CLASS_NAMES), "mAP"]
+    if cmap in ("icmapper", "both"):
+        header.append("C-mAP")
+    if cmap in ("maptracker", "both"):
+        header += ["mAP (MT)", "C-mAP (MT)"]
     rows = []
     for r in results:
-        det, cons = r["detection"], r["consistency"]
-        rows.append(
-            [_name(r), r["range"]]
-            + [_fmt(det["AP_class"][c], 100) for c in CLASS_NAMES]
-            + [_fmt(det["mAP"], 100), _fmt(cons["C-mAP"], 100)]
-        )
+        det = r["detection"]
+        row = [_name(r), r["range"]] + [_fmt(det["AP_class"][c], 100) for c in CLASS_NAMES]
+        row.append(_fmt(det["mAP"], 100))
+        if cmap in ("icmapper", "both"):
+            row.append(_fmt(r["consistency"]["C-mAP"], 100))
+        if cmap in ("maptracker", "both"):
+            mt = r.get("consistency_maptracker") or {}
+            row += [_fmt(mt.get("mAP"), 100), _fmt(mt.get("C-mAP"), 100)]
+        rows.append(row)
     return _table(header, rows)
 
 
@@ -81,11 +90,12 @@ def mapping_table(results: Sequence[dict]) -> str:
     return _table(header, rows)
 
 
-def markdown(results: Sequence[dict]) -> str:
-    """The three tables, titled, one row per result (method and range)."""
+def markdown(results: Sequence[dict], cmap: str = "icmapper") -> str:
+    """The three tables, titled, one row per result (method and range); ``cmap``: the C-mAP
+    columns of Table 1 (``detection_table``)."""
     parts = [
         "### Detection (AP x100, Chamfer thresholds per range)",
-        detection_table(results),
+        detection_table(results, cmap),
         "### Tracking (MOTA x100, MOTP m, IDS per sequence)",
         tracking_table(results),
         "### Global map (CD m, lower is better; mGAP x100)",

@@ -83,6 +83,7 @@ def run_methods(
     seqs = _open(source, image_size, seed, render=inp.needs_images)
     if not seqs:
         raise ValueError(f"source {source!r} has no sequences")
+    inp.match(source, seqs)  # a prediction file's frames against the source's
     factories = {m: method_factory(m, inp, rng, config) for m in methods}
     out.mkdir(parents=True, exist_ok=True)
     run_dirs = []
@@ -137,14 +138,8 @@ def _write_json_atomic(path: Path, data: Any) -> None:
 
 
 def range_of_detections(inp: Any) -> Any:
-    """The perception range of a run: the checkpoint's with the learned detector, else 60x30."""
-    from icmapper.data.types import RANGE_60x30
-
-    if inp.checkpoint:
-        from icmapper.models.network import checkpoint_settings
-
-        return checkpoint_settings(inp.checkpoint)[0]
-    return RANGE_60x30
+    """The perception range of a run (``DetectionInput.perception_range``)."""
+    return inp.perception_range()
 
 
 def cmd_map(args: argparse.Namespace) -> int:
@@ -224,7 +219,8 @@ def _common(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--detections",
         default="learned",
-        help="'learned' (the checkpoint's detector) or 'oracle[:none|low|medium|high]' (noisy GT)",
+        help="'learned' (the checkpoint's detector), 'oracle[:none|low|medium|high]' (noisy GT) "
+        "or 'file:PATH[:FORMAT][:RANGE]' (a prediction file; formats below, docs/eval.md)",
     )
     p.add_argument(
         "--checkpoint",
@@ -255,6 +251,7 @@ def _common(p: argparse.ArgumentParser) -> None:
 
 def register(subparsers: Any) -> None:
     from icmapper.data.sources import sources_help
+    from icmapper.formats import formats_help
     from icmapper.mapping.methods import methods
 
     epilog = (
@@ -262,6 +259,8 @@ def register(subparsers: Any) -> None:
         + sources_help()
         + "\n\nmethods:\n"
         + "\n".join(f"  {n:<24} {i.help}" for n, i in methods().items())
+        + "\n\nprediction file formats (--detections file:PATH[:FORMAT]):\n"
+        + formats_help()
     )
     p = subparsers.add_parser(
         "map",

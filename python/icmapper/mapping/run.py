@@ -58,20 +58,54 @@ class ReplaySource:
         return Detections(d.classes, d.scores, d.points, None, d.gt_ids)
 
 
+class NetworkUnits:
+    """File detections with the learned detector's point normalisation (``detector.to_unit``),
+    which the learned association needs: the source of a learned mapper that runs a checkpoint's
+    association and fusion networks on a prediction file's detections and query features."""
+
+    def __init__(self, inner: DetectionSource, detector: Any) -> None:
+        self.inner = inner
+        self.detector = detector
+
+    def reset(self) -> None:
+        self.inner.reset()
+
+    def detect(self, frame: Frame) -> Detections:
+        return self.inner.detect(frame)
+
+
+#: ``--detections`` forms, for help and errors.
+DETECTIONS_USAGE = "'learned', 'oracle[:PRESET]' or 'file:PATH[:FORMAT][:RANGE]'"
+
+
 @dataclass
 class DetectionInput:
-    """Where detections come from: the learned detector of a checkpoint or the noisy-GT oracle."""
+    """Where detections come from: the learned detector of a checkpoint, the noisy-GT oracle, or
+    a prediction file (``icmapper.formats``).
+
+    With a file, ``predictions`` is the read file and ``networks`` the checkpoint whose
+    association and fusion networks the learned mapper runs on the file's detections — set only
+    when the file carries query features for every detection (else IC-Mapper associates by
+    position and does not fuse, as on the oracle). ``match(spec, sequences)`` pairs the file's
+    frames with the source's before any method runs.
+    """
 
     checkpoint: str | None = None
     oracle_noise: str | None = None  # preset name ("none", "low", "medium", "high")
     device: str = "cpu"
     seed: int = 0
+    file: str | None = None
+    predictions: Any = None  # formats.PredictionSet of ``file``
+    networks: str | None = None
+    matched: Any = None  # formats.PredictionInput once ``match`` ran
 
     @staticmethod
     def parse(
         detections: str, checkpoint: str | None, device: str = "cpu", seed: int = 0
     ) -> DetectionInput:
-        """detections: "learned" or "oracle[:PRESET]"."""
+        """detections: "learned", "oracle[:PRESET]" or "file:PATH[:FORMAT][:RANGE]" (FORMAT a
+        registered prediction format, recognised from the content when left out; RANGE e.g.
+        "100x50" for formats that do not record it). A file is read (and checked) here."""
         if detections == "learned":
             if not checkpoint:
                 raise ValueError("--detections learned needs --checkpoint PATH")
@@ -81,13 +115,73 @@ class DetectionInput:
         if detections == "oracle" or detections.startswith("oracle:"):
             preset = detections.split(":", 1)[1] if ":" in detections else "low"
             return DetectionInput(oracle_noise=preset, device=device, seed=seed)
-        raise ValueError(
-            f"bad --detections {detections!r}; expected 'learned' or 'oracle[:PRESET]'"
+        if detections.startswith("file:"):
+            return DetectionInput._parse_file(detections[5:], checkpoint, device, seed)
+        raise ValueError(f"bad --detections {detections!r}; expected {DETECTIONS_USAGE}")
+
+    @staticmethod
+    def _parse_file(rest: str, checkpoint: str | None, device: str, seed: int) -> DetectionInput:
+        import re
+
+        from icmapper.formats import formats, read_predictions
+
+        path, fmt, rng = rest, None, None
+        for _ in range(2):  # peel ":RANGE" and ":FORMAT" off the end (a path may hold ':')
+            head, sep, tail = path.rpartition(":")
+            if not sep or Path(path).exists():
+                break
+            if rng is None and fmt is None and re.fullmatch(r"\d+(\.\d+)?x\d+(\.\d+)?", tail):
+                path, rng = head, tail
+            elif fmt is None and tail in formats():
+                path, fmt = head, tail
+            else:
+                break
+        if not path:
+            raise ValueError(f"--detections file:PATH: no path; expected {DETECTIONS_USAGE}")
+        preds = read_predictions(path, fmt, rng)
+        networks = None
+        if preds.has_queries and checkpoint:
+            from icmapper.models.network import checkpoint_settings
+
+            if not Path(checkpoint).is_file():
+                raise OSError(f"checkpoint {checkpoint} does not exist")
+            ck_range = checkpoint_settings(checkpoint)[0].name
+            if ck_range != preds.range_name:
+                raise ValueError(
+                    f"{path}: predictions at range {preds.range_name}, but the checkpoint "
+                    f"{checkpoint} (whose association and fusion would run on their query "
+                    f"features) works at {ck_range}"
+                )
+            networks = checkpoint
+        return DetectionInput(
+            device=device, seed=seed, file=path, predictions=preds, networks=networks
         )
+
+    def match(self, spec: str, sequences: list[Sequence]) -> None:
+        """Pairs a prediction file's frames with the source's (no-op for other inputs);
+        PredictionFileError names the first frame that does not fit."""
+        if self.predictions is not None:
+            from icmapper.formats.source import PredictionInput
+
+            self.matched = PredictionInput(self.predictions, spec, sequences)
+            for seq in sequences:
+                self.matched.check_complete(seq)
 
     @property
     def needs_images(self) -> bool:
         return self.checkpoint is not None
+
+    def perception_range(self) -> PerceptionRange:
+        """The range of the run: the checkpoint's, the file's, or 60x30 for the oracle."""
+        from icmapper.data.types import RANGE_60x30
+
+        if self.checkpoint:
+            from icmapper.models.network import checkpoint_settings
+
+            return checkpoint_settings(self.checkpoint)[0]
+        if self.predictions is not None:
+            return PerceptionRange.from_name(self.predictions.range_name)
+        return RANGE_60x30
 
 
 #: (sequence, recorded detections or None) -> (method, its recorder or None)
@@ -112,30 +206,43 @@ def method_factory(
 
     info = method(name)
     cfg = config or MapperConfig()
+    live = inp.checkpoint is not None  # the learned detector runs on images
 
-    def oracle(seq: Sequence) -> DetectionSource:
+    def base_source(seq: Sequence) -> DetectionSource:
+        """The detections of a method without the live detector: the file's or the oracle's."""
+        if inp.file is not None:
+            if inp.matched is None:
+                raise ValueError("file detections: DetectionInput.match(spec, sequences) first")
+            return inp.matched.source(seq)
         from icmapper.mapping.oracle import OracleDetector
 
         return OracleDetector(seq, rng=rng, noise=inp.oracle_noise or "low", seed=inp.seed)
 
-    if inp.checkpoint is None and info.learned_only:
+    if not live and info.learned_only:
         raise ValueError(f"method {name} needs the learned detector (--detections learned)")
 
     if info.variant is not None:
         variant = info.variant
         built: list = []  # [Mapper, its NetworkDetector] once loaded
 
-        def make_mapper(seq: Sequence, records: dict[int, Detections] | None):
-            if inp.checkpoint is None:
-                return Mapper(oracle(seq), config=cfg, rng=rng, name=name), None
+        def load(path: str) -> tuple[Mapper, Any]:
             if not built:  # load the checkpoint once; the Mapper is reset for every sequence
                 built.append(
-                    Mapper.from_checkpoint(
-                        inp.checkpoint, config=config, device=inp.device, variant=variant
-                    )
+                    Mapper.from_checkpoint(path, config=config, device=inp.device, variant=variant)
                 )
                 built.append(built[0].source)
-            m, net_source = built
+            return built[0], built[1]
+
+        def make_mapper(seq: Sequence, records: dict[int, Detections] | None):
+            if inp.networks is not None:  # the checkpoint's networks on the file's queries
+                m, net_source = load(inp.networks)
+                src = base_source(seq)
+                _check_query_size(inp, net_source.detector)
+                m.source = NetworkUnits(src, net_source.detector)
+                return m, None
+            if not live:
+                return Mapper(base_source(seq), config=cfg, rng=rng, name=name), None
+            m, net_source = load(inp.checkpoint)  # type: ignore[arg-type]
             m.source = net_source
             if m.config.use_association and records is None:
                 rec = RecordingSource(net_source)
@@ -150,8 +257,8 @@ def method_factory(
     net: list = []  # the learned detection source, once loaded
 
     def make_baseline(seq: Sequence, records: dict[int, Detections] | None):
-        if inp.checkpoint is None:
-            return build(oracle(seq), cfg, rng), None
+        if not live:
+            return build(base_source(seq), cfg, rng), None
         if records is not None:
             return build(ReplaySource(records), cfg, rng), None
         if not net:  # load the checkpoint once
@@ -162,6 +269,17 @@ def method_factory(
         return build(rec, cfg, rng), rec
 
     return make_baseline
+
+
+def _check_query_size(inp: DetectionInput, detector: Any) -> None:
+    """ValueError when the file's query features do not fit the checkpoint's networks."""
+    dims = {f.queries.shape[1] for f in inp.predictions.frames if f.queries is not None}
+    want = int(detector.cfg.channels)
+    if dims and dims != {want}:
+        raise ValueError(
+            f"{inp.file}: query features of size {sorted(dims)}, but the checkpoint "
+            f"{inp.networks} has {want} channels"
+        )
 
 
 def unique_track_ids(ids: NDArray[np.int64], start: int) -> tuple[NDArray[np.int64], int]:
