@@ -56,7 +56,6 @@ class DriveMapper:
     """Maps drives with the settings of a city run (see the module docstring)."""
 
     def __init__(self, settings: CitySettings) -> None:
-        from icmapper.mapping.cli import range_of_detections
         from icmapper.mapping.config import MapperConfig
         from icmapper.mapping.run import DetectionInput, method_factory
 
@@ -64,7 +63,7 @@ class DriveMapper:
         self.inp = DetectionInput.parse(
             settings.detections, settings.checkpoint, settings.device, settings.seed
         )
-        self.rng = range_of_detections(self.inp)
+        self.rng = self.inp.perception_range()
         self.config = MapperConfig.from_dict(settings.config)
         self.factory = method_factory(settings.method, self.inp, self.rng, self.config)
         self._sources: dict[str, dict[str, Any]] = {}
@@ -80,6 +79,7 @@ class DriveMapper:
                 seed=self.settings.seed,
                 render=self.inp.needs_images,
             )
+            self.inp.match(spec, seqs)  # a prediction file's frames against the source's
             self._sources[spec] = {s.name: s for s in seqs}
         by_name = self._sources[spec]
         if name not in by_name:

@@ -73,8 +73,6 @@ def build_city(
     mode: str = "merge",
     workers: int = 0,
     ray_address: str | None = None,
-    gate: float = 1.5,
-    min_overlap: float = 0.5,
     pictures: bool = True,
     log: Any = print,
 ) -> CityManifest:
@@ -83,7 +81,10 @@ def build_city(
     local instance, or the cluster at ``ray_address``); 0 runs them in-process. Returns the
     manifest."""
     from icmapper._icmap import GlobalMap
+    from icmapper.mapping.config import MapperConfig
 
+    cfg = MapperConfig.from_dict(settings.config)
+    gate, min_overlap = cfg.city_gate, cfg.city_min_overlap
     if mode not in MODES:
         raise ValueError(f"unknown city mode {mode!r}; expected one of {', '.join(MODES)}")
     city = Path(city)

@@ -43,12 +43,20 @@ def write_json(path: str | os.PathLike, results: list[dict]) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from icmapper.city.manifest import is_city_run
     from icmapper.eval.evaluate import evaluate_predictions, evaluate_run
     from icmapper.eval.report import markdown
 
     mt = args.cmap in ("maptracker", "both")
     results = []
     for d in args.runs:
+        if is_city_run(d):  # a city run: the city map against the cross-drive ground truth
+            from icmapper.city.evaluate import city_table, evaluate_city
+
+            city = evaluate_city(d)
+            print(city_table(city))
+            results.extend(city["drives"])
+            continue
         if d.startswith("file:"):
             if not args.source:
                 raise ValueError(f"{d}: evaluating a prediction file needs --source SPEC")

@@ -143,9 +143,17 @@ def range_of_detections(inp: Any) -> Any:
 
 
 def cmd_map(args: argparse.Namespace) -> int:
+    if args.city:
+        from icmapper.city.cli import cmd_city
+
+        return cmd_city(args, mapper_config(args), _image_size(args))
+    if len(args.source) != 1:
+        raise ValueError("map takes one --source (several only with --city)")
+    if not args.out:
+        raise ValueError("map needs --out (or --city for a city run)")
     run_methods(
         [args.method],
-        args.source,
+        args.source[0],
         Path(args.out),
         args.detections,
         args.checkpoint,
@@ -215,7 +223,7 @@ def _default_methods(args: argparse.Namespace) -> tuple[str, ...]:
     return tuple(n for n, info in methods().items() if learned or info.distinct_without_learned)
 
 
-def _common(p: argparse.ArgumentParser) -> None:
+def _common(p: argparse.ArgumentParser, required_out: bool = True) -> None:
     p.add_argument(
         "--detections",
         default="learned",
@@ -227,7 +235,7 @@ def _common(p: argparse.ArgumentParser) -> None:
         default=str(DEFAULT_CHECKPOINT) if DEFAULT_CHECKPOINT.is_file() else None,
         help="training checkpoint (default: icmapper.checkpoints.DEFAULT_CHECKPOINT)",
     )
-    p.add_argument("--out", required=True, help="output folder")
+    p.add_argument("--out", required=required_out, help="output folder")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--device", default="cpu")
     p.add_argument("--image-size", type=int, nargs=2, metavar=("H", "W"))
@@ -271,9 +279,17 @@ def register(subparsers: Any) -> None:
         "writes a run folder (docs/eval.md), the global maps (.icmap, .geojson) and PNGs.",
     )
     known = methods()
-    p.add_argument("--source", required=True, help="a source spec (listed below)")
+    p.add_argument(
+        "--source",
+        action="append",
+        required=True,
+        help="a source spec (listed below); repeatable with --city",
+    )
     p.add_argument("--method", default="icmapper", choices=list(known), metavar="METHOD")
-    _common(p)
+    _common(p, required_out=False)
+    from icmapper.city.cli import add_city_arguments
+
+    add_city_arguments(p)
     p.set_defaults(func=cmd_map)
 
     c = subparsers.add_parser(

@@ -52,6 +52,11 @@ class MapperConfig:
     cluster_min_samples: int = _f(5, "Cluster & Fit: DBSCAN min_samples")
     polymerge_buffer: float = _f(1.0, "PolyMerge: overlap buffer (m)")
     polymerge_min_overlap: float = _f(0.3, "PolyMerge: share of a detection that must overlap")
+    # ---- city maps (icmapper map --city): merging drive maps in the engine
+    city_gate: float = _f(1.5, "city merge: metres within which instances of two maps overlap")
+    city_min_overlap: float = _f(
+        0.5, "city merge: share of an instance within the gate for two instances to merge"
+    )
 
     def __post_init__(self) -> None:
         for name in ("detect_threshold", "track_threshold", "assoc_threshold",
@@ -62,7 +67,7 @@ class MapperConfig:
         if self.track_threshold < self.detect_threshold:
             raise ValueError("MapperConfig.track_threshold must be >= detect_threshold")
         for name in ("positional_scale", "spacing", "smoothing", "history_points", "gate",
-                     "vma_overlap", "cluster_eps", "polymerge_buffer"):  # fmt: skip
+                     "vma_overlap", "cluster_eps", "polymerge_buffer", "city_gate"):  # fmt: skip
             if not getattr(self, name) > 0:
                 raise ValueError(f"MapperConfig.{name} must be > 0, got {getattr(self, name)}")
         for name in ("min_hits", "cluster_min_samples"):
@@ -71,6 +76,10 @@ class MapperConfig:
         for name in ("max_age", "reid_distance", "fusion_margin"):
             if not getattr(self, name) >= 0:
                 raise ValueError(f"MapperConfig.{name} must be >= 0, got {getattr(self, name)}")
+        if not 0.0 < self.city_min_overlap <= 1.0:
+            raise ValueError(
+                f"MapperConfig.city_min_overlap must be in (0, 1], got {self.city_min_overlap}"
+            )
         if not 0.0 < self.polymerge_min_overlap <= 1.0:
             raise ValueError(
                 f"MapperConfig.polymerge_min_overlap must be in (0, 1], "
