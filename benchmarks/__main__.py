@@ -32,6 +32,10 @@ BENCHMARKS: dict[str, tuple[str, str]] = {
         "benchmarks.python_geometry",
         "icmapper.geom's engine calls vs batched numpy forms (resample, Chamfer, point clouds)",
     ),
+    "city": (
+        "benchmarks.city",
+        "city run of N drives of one synthetic city: in-process vs Ray with 1 and 2 workers",
+    ),
     "images": (
         "benchmarks.images",
         "real camera images: JPEG decode + resize frames/s by decoder and DataLoader workers",
