@@ -36,6 +36,10 @@ BENCHMARKS: dict[str, tuple[str, str]] = {
         "benchmarks.city",
         "city run of N drives of one synthetic city: in-process vs Ray with 1 and 2 workers",
     ),
+    "longrun": (
+        "benchmarks.longrun",
+        "resident memory over a 10,000-frame mapping run (oracle detections)",
+    ),
     "images": (
         "benchmarks.images",
         "real camera images: JPEG decode + resize frames/s by decoder and DataLoader workers",

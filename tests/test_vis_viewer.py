@@ -88,7 +88,8 @@ def test_nearest_gt_chamfer_against_brute_force(
 ) -> None:
     """Each instance's distance to its nearest same-class GT, recomputed with the dense Chamfer
     matrix over every GT instance (no candidate pruning)."""
-    from icmapper.eval.chamfer import NUM_SAMPLES, chamfer_matrix, resample
+    from icmapper.eval.chamfer import NUM_SAMPLES
+    from icmapper.geom import chamfer_matrix, resample_many
 
     replay = open_replay(run_dir, render=False)
     gt = [(int(g.cls), np.asarray(g.points), bool(g.closed)) for g in replay.global_gt]
@@ -96,8 +97,8 @@ def test_nearest_gt_chamfer_against_brute_force(
     assert any(v is not None for v in cd)
     for m, v, j in zip(replay.map_items, cd, which, strict=True):
         same = [k for k, g in enumerate(gt) if g[0] == m.cls]
-        a = resample(m.points[None], NUM_SAMPLES, m.closed)
-        b = np.stack([resample(gt[k][1][None], NUM_SAMPLES, gt[k][2])[0] for k in same])
+        a = resample_many(m.points[None], NUM_SAMPLES, m.closed)
+        b = np.stack([resample_many(gt[k][1][None], NUM_SAMPLES, gt[k][2])[0] for k in same])
         d = chamfer_matrix(a, b)[0]
         if v is None:  # nothing within reach: every same-class GT is far
             lo, hi = m.points.min(0), m.points.max(0)

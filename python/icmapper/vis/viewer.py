@@ -65,7 +65,8 @@ def nearest_gt_chamfer(
     """For each map instance: the Chamfer distance (evaluation protocol: 200 points by arc
     length) to the nearest same-class GT instance within ``NEAREST_GT_REACH`` of its bounding
     box, and that GT's index (None, None where there is none)."""
-    from icmapper.eval.chamfer import NUM_SAMPLES, chamfer_pairs, resample
+    from icmapper.eval.chamfer import NUM_SAMPLES
+    from icmapper.geom import chamfer_pairs, resample_many
 
     cd: list[float | None] = [None] * len(items)
     which: list[int | None] = [None] * len(items)
@@ -74,14 +75,14 @@ def nearest_gt_chamfer(
     g_cls = np.array([c for c, _, _ in gt])  # (G,)
     g_lo = np.array([p.min(0) for _, p, _ in gt])  # (G, 2)
     g_hi = np.array([p.max(0) for _, p, _ in gt])  # (G, 2)
-    g_fine = [resample(p[None], NUM_SAMPLES, closed)[0] for _, p, closed in gt]  # G x (200, 2)
+    g_fine = [resample_many(p[None], NUM_SAMPLES, closed)[0] for _, p, closed in gt]  # G x (200, 2)
     for i, m in enumerate(items):
         lo, hi = m.points.min(0), m.points.max(0)
         gap = np.maximum(np.maximum(g_lo - hi, lo - g_hi), 0.0)  # (G, 2)
         cand = np.flatnonzero((g_cls == m.cls) & (np.hypot(*gap.T) <= NEAREST_GT_REACH))
         if cand.size == 0:
             continue
-        a = resample(m.points[None], NUM_SAMPLES, m.closed)  # (1, 200, 2)
+        a = resample_many(m.points[None], NUM_SAMPLES, m.closed)  # (1, 200, 2)
         d = chamfer_pairs(np.repeat(a, cand.size, 0), np.stack([g_fine[j] for j in cand]))
         k = int(np.argmin(d))
         cd[i], which[i] = round(float(d[k]), 3), int(cand[k])
