@@ -106,32 +106,6 @@ def polyline_length(points: NDArray[np.float64]) -> float:
     return float(np.linalg.norm(np.diff(points, axis=0), axis=1).sum()) if len(points) > 1 else 0.0
 
 
-def densify(points: NDArray[np.float64], step: float) -> tuple[NDArray[np.float64], float]:
-    """Points about `step` apart along an open polyline -> ((m, 2) points, arc length per point)."""
-    seg = np.diff(points, axis=0)  # (n-1, 2)
-    seg_len = np.linalg.norm(seg, axis=1)  # (n-1,)
-    total = float(seg_len.sum())
-    m = max(2, int(np.ceil(total / step)) + 1)
-    s = np.linspace(0.0, total, m)  # (m,)
-    cum = np.concatenate([[0.0], np.cumsum(seg_len)])  # (n,)
-    x = np.interp(s, cum, points[:, 0])
-    y = np.interp(s, cum, points[:, 1])
-    return np.stack([x, y], axis=1), total / max(m - 1, 1)
-
-
-def point_to_polyline_distance(
-    points: NDArray[np.float64], line: NDArray[np.float64]
-) -> NDArray[np.float64]:
-    """Distance of each of the (n, 2) points to the (m, 2) polyline -> (n,)."""
-    a = line[:-1]  # (m-1, 2)
-    ab = line[1:] - a  # (m-1, 2)
-    denom = np.maximum((ab * ab).sum(axis=1), 1e-12)  # (m-1,)
-    ap = points[:, None, :] - a[None]  # (n, m-1, 2)
-    t = np.clip((ap * ab[None]).sum(axis=2) / denom[None], 0.0, 1.0)  # (n, m-1)
-    closest = a[None] + t[..., None] * ab[None]  # (n, m-1, 2)
-    return np.linalg.norm(points[:, None, :] - closest, axis=2).min(axis=1)  # (n,)
-
-
 def overlaps(a: NDArray[np.float64], b: NDArray[np.float64]) -> bool:
     """StreamMapNet's rule: area(buffer(a, 0.3) ∩ buffer(b, 0.3)) > 0.2 * min(len a, len b).
 
@@ -151,10 +125,15 @@ def overlaps(a: NDArray[np.float64], b: NDArray[np.float64]) -> bool:
     near = np.all(seg_lo <= hi_s + pad, axis=1) & np.all(seg_hi >= lo_s - pad, axis=1)  # (k,)
     if not near.any():
         return False
-    dense, ds = densify(short, 0.1)
-    d = np.full(len(dense), np.inf)  # (m,)
-    for k in np.nonzero(near)[0]:
-        d = np.minimum(d, point_to_polyline_distance(dense, other[k : k + 2]))
+    if min(la, lb) <= 0.0:
+        return False
+    from icmapper import geom
+
+    dense = geom.resample_spacing(short, 0.1)  # (m, 2) about 0.1 m apart
+    ds = min(la, lb) / (len(dense) - 1)  # arc length per sample
+    k = np.flatnonzero(near)  # (K,)
+    segs = np.stack([other[k], other[k + 1]], axis=1)[None]  # (1, K, 2, 2)
+    d = geom.point_to_segments(dense[None], segs)[0, 0]  # (m,) to the nearest near segment
     area = float(np.maximum(0.0, 2 * OVERLAP_BUFFER - d).sum() * ds)
     return area > OVERLAP_RATIO * min(la, lb)
 
