@@ -188,3 +188,24 @@ def test_polyline_segments_layout_and_errors() -> None:
     np.testing.assert_array_equal(seg[:, :2, 1], pts[:, 1:])
     with pytest.raises(ValueError, match=r"\(B, m, 2, 2\)"):
         geom.point_to_segments(pts, pts)
+
+
+def test_project_onto_polyline_matches_shapely() -> None:
+    import shapely
+    from icmapper.geom import project_onto_polyline
+
+    rng = np.random.default_rng(3)
+    for _ in range(20):
+        line = np.cumsum(rng.normal(size=(int(rng.integers(2, 12)), 2)), axis=0)
+        pts = rng.normal(size=(30, 2)) * 3
+        d, s = project_onto_polyline(pts, line)
+        ls = shapely.LineString(line)
+        ref_d = shapely.distance(shapely.points(pts), ls)
+        np.testing.assert_allclose(d, ref_d, atol=1e-9)
+        # the arc length names a point at that distance (ties may pick another segment)
+        at = shapely.line_interpolate_point(ls, s)
+        np.testing.assert_allclose(shapely.distance(shapely.points(pts), at), ref_d, atol=1e-9)
+    # ties: a point equidistant from two segments takes the earlier one (smaller arc length)
+    v = np.array([[0.0, 0.0], [2.0, 0.0], [2.0, 2.0]])
+    _, s = project_onto_polyline(np.array([[3.0, -1.0]]), v, tie_tol=1e-9)
+    assert s[0] == pytest.approx(2.0)

@@ -142,6 +142,32 @@ def resample_many(
     return out
 
 
+def project_onto_polyline(
+    points: ArrayLike, poly: ArrayLike, tie_tol: float = 0.0
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Nearest point of an open polyline for each point (numpy, batched over the points).
+
+    points (n, 2), poly (m, 2) with m >= 1 -> (dist (n,), s (n,)): the distance to the polyline
+    and the arc length (metres from poly[0]) of the nearest point on it. Among segments within
+    ``tie_tol`` of the nearest distance the first one (smallest arc length) is taken.
+    """
+    p = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+    q = np.asarray(poly, dtype=np.float64).reshape(-1, 2)
+    if q.shape[0] == 0:
+        raise ValueError("project_onto_polyline: the polyline has no points")
+    if q.shape[0] == 1:
+        return np.linalg.norm(p - q[0], axis=1), np.zeros(p.shape[0])
+    a, ab = q[:-1], np.diff(q, axis=0)  # (m-1, 2)
+    seg_len = np.linalg.norm(ab, axis=1)  # (m-1,)
+    s0 = np.concatenate([[0.0], np.cumsum(seg_len)])[:-1]  # (m-1,)
+    denom = np.maximum(seg_len**2, 1e-18)  # (m-1,)
+    t = np.clip(np.einsum("nmk,mk->nm", p[:, None, :] - a[None], ab) / denom, 0.0, 1.0)  # (n, m-1)
+    d = np.linalg.norm(p[:, None, :] - (a[None] + t[..., None] * ab[None]), axis=2)  # (n, m-1)
+    j = np.argmax(d <= d.min(axis=1, keepdims=True) + tie_tol, axis=1)  # (n,) first near-best
+    rows = np.arange(p.shape[0])
+    return d[rows, j], s0[j] + t[rows, j] * seg_len[j]
+
+
 def arc_lengths(points: ArrayLike) -> NDArray[np.float64]:
     """Cumulative arc length at every vertex of an (n, 2) polyline -> (n,), starting at 0."""
     pts = np.asarray(points, dtype=np.float64)

@@ -303,13 +303,9 @@ def point_orders(points: NDArray[np.floating], closed: bool) -> NDArray[np.float
 
 def _arc_start(line: NDArray[np.float64], point: NDArray[np.float64]) -> float:
     """Arc length along `line` of its point nearest to `point` (smallest arc length on ties)."""
-    a, ab = line[:-1], np.diff(line, axis=0)  # (m-1, 2)
-    seg_len = np.linalg.norm(ab, axis=1)
-    t = np.clip(((point - a) * ab).sum(axis=1) / np.maximum(seg_len**2, 1e-18), 0.0, 1.0)
-    d = np.linalg.norm(a + t[:, None] * ab - point, axis=1)
-    cum = np.concatenate([[0.0], np.cumsum(seg_len)])
-    best = np.nonzero(d <= d.min() + 1e-6)[0][0]
-    return float(cum[best] + t[best] * seg_len[best])
+    from icmapper import geom
+
+    return float(geom.project_onto_polyline(point[None], line, tie_tol=1e-6)[1][0])
 
 
 def _cut(line: NDArray[np.float64], s0: float, s1: float) -> NDArray[np.float64]:

@@ -10,30 +10,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-
-def project_onto_polyline(
-    points: NDArray[np.floating], poly: NDArray[np.floating]
-) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Nearest point of an open polyline for each point.
-
-    points (n, 2), poly (m, 2) with m >= 1 -> (dist (n,), s (n,)): the distance to the polyline and
-    the arc-length parameter (metres from poly[0]) of the nearest point on it.
-    """
-    p = np.asarray(points, dtype=np.float64)
-    q = np.asarray(poly, dtype=np.float64)
-    if q.shape[0] == 1:
-        return np.linalg.norm(p - q[0], axis=1), np.zeros(p.shape[0])
-    a, b = q[:-1], q[1:]  # (m-1, 2)
-    ab = b - a  # (m-1, 2)
-    seg_len = np.linalg.norm(ab, axis=1)  # (m-1,)
-    s0 = np.concatenate([[0.0], np.cumsum(seg_len)])[:-1]  # (m-1,)
-    denom = np.maximum(seg_len**2, 1e-12)
-    t = np.clip(np.einsum("nmk,mk->nm", p[:, None, :] - a[None], ab) / denom, 0.0, 1.0)  # (n, m-1)
-    nearest = a[None] + t[..., None] * ab[None]  # (n, m-1, 2)
-    d = np.linalg.norm(p[:, None, :] - nearest, axis=2)  # (n, m-1)
-    j = np.argmin(d, axis=1)  # (n,)
-    rows = np.arange(p.shape[0])
-    return d[rows, j], s0[j] + t[rows, j] * seg_len[j]
+from icmapper.geom import project_onto_polyline
 
 
 def ring_distance(points: NDArray[np.floating], ring: NDArray[np.floating]) -> NDArray[np.float64]:
