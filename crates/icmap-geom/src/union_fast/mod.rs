@@ -36,7 +36,8 @@
 //!
 //! # Fallback rule
 //!
-//! `None` (use the general overlay) on: more than [`MAX_VERTICES`] vertices in all, a ring with
+//! `None` (use the general overlay) on: more than [`MAX_VERTICES`] vertices in all, a joint
+//! extent so small that `tol^2` is not a normal float (below about 1e-147 m), a ring with
 //! (nearly) zero area or an edge shorter than `tol`, a ring that is not simple or has a spike,
 //! any two features of different rings closer than `tol` without a proper crossing between them
 //! (touching, shared or collinear edges, a crossing near a vertex), two crossings closer than
@@ -185,6 +186,9 @@ fn union_in(a: &[Point], b: &[Point], sc: &mut Scratch, holes_ok: bool) -> Optio
     let (extent, along_x) = box_a.join(&box_b).extent()?;
     let tol = REL_TOL * extent;
     let tol2 = tol * tol;
+    if tol2 < f64::MIN_POSITIVE {
+        return None; // so small that distances squared lose their digits (subnormal)
+    }
 
     // Orientation (counter-clockwise) and non-degenerate area. `src.orig` maps a vertex of the
     // (possibly reversed) local ring back to the caller's exact coordinates.

@@ -5,9 +5,10 @@ use super::{MAX_VERTICES, NEAR_MARGIN, REL_TOL};
 use crate::types::Point;
 
 /// Whether a closed ring (no repeated closing point, finite) is clearly simple: at least 3
-/// vertices, area well away from zero, no edge shorter than `tol`, no spike, and any two
-/// non-neighbouring edges at least `tol` apart, with `tol = 1e-7 * extent` of the ring's own
-/// bounding box (the same rule [`union_two_simple`] applies to each of its rings). Such a ring is
+/// vertices, an extent whose `tol^2` is a normal float, area well away from zero, no edge shorter
+/// than `tol`, no spike, and any two non-neighbouring edges at least `tol` apart, with
+/// `tol = 1e-7 * extent` of the ring's own bounding box (the same rule
+/// [`union_two_simple`](super::union_two_simple) applies to each of its rings). Such a ring is
 /// its own resolution: the overlay's `unary_union` of it gives back the same polygon up to its
 /// grid snapping. `false` asks for the overlay.
 pub(crate) fn ring_is_simple(ring: &[Point]) -> bool {
@@ -28,6 +29,9 @@ pub(crate) fn ring_is_simple(ring: &[Point]) -> bool {
     };
     let tol = REL_TOL * extent;
     let tol2 = tol * tol;
+    if tol2 < f64::MIN_POSITIVE {
+        return false;
+    }
     let a2 = area2(&r).abs();
     if a2.is_nan() || a2 <= tol * extent {
         return false;
