@@ -14,10 +14,12 @@ import subprocess
 import sys
 import textwrap
 from pathlib import Path
+from typing import Any
 
 import icmapper
 import numpy as np
 import pytest
+from icmapper import GlobalMap, geom
 
 # The ring of ~1e-299 m that made polygon_union spin for 15 CPU-minutes (issue 14, point 1).
 TINY_RING = [
@@ -26,6 +28,7 @@ TINY_RING = [
     [-4.2127516405641947e-299, 6.3347407334057527e-300],
 ]
 SQUARE = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])  # (4, 2)
+LINE = np.array([[0.0, 0.0], [10.0, 0.0], [20.0, 5.0]])  # (3, 2)
 CHILD_MEMORY = 4 << 30  # bytes of address space for a child interpreter
 
 
@@ -108,3 +111,83 @@ def test_polygon_union_is_scale_invariant_down_to_subnormals() -> None:
             s = 10.0**e
             assert len(u) == 1, e
             assert abs(ring_area(np.array(u[0])) / (s * s) - 1.75) < 1e-6, e
+
+
+# ---------------------------------------------------------------------------------------------
+# 2. resample's unbounded allocation (abort) and capacity-overflow panic
+
+
+@pytest.mark.timeout(120)
+def test_resample_huge_n_raises_value_error() -> None:
+    """``resample(pts, 10**12)`` allocated 8 TB and aborted the process; ``2**63 - 1`` raised
+    pyo3's PanicException (capacity overflow); ``2**64`` an OverflowError naming nothing. Now each
+    raises ValueError naming ``n`` (in a child interpreter under a 4 GB limit, so a regression
+    cannot take the suite down); the largest allowed ``n`` still works."""
+    code = """
+        import json
+        import numpy as np
+        from icmapper import geom
+        p = np.array([[0.0, 0.0], [1.0, 0.0]])
+        out = []
+        for n in (10**12, 2**63 - 1, 2**64, 10_000_001):
+            for closed in (False, True):
+                try:
+                    geom.resample(p, n, closed=closed)
+                    out.append("returned")
+                except BaseException as e:
+                    out.append(f"{type(e).__name__}: {e}")
+        out.append(len(geom.resample(p, 10_000_000)))
+        print(json.dumps(out))
+    """
+    proc = run_child(code, timeout=90)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    *errors, biggest = json.loads(proc.stdout)
+    assert len(errors) == 8
+    for e in errors:
+        assert e.startswith("ValueError") and "`n`" in e, e
+    assert biggest == 10_000_000
+
+
+@pytest.mark.timeout(30)
+@pytest.mark.parametrize(
+    "call",
+    [
+        lambda m: m.sample_patch((0.0, 0.0, 0.0), (5.0, 5.0), n_points=2**64),
+        lambda m: m.sample_patch((0.0, 0.0, 0.0), (5.0, 5.0), n_points=10**12),
+        lambda m: m.insert(1, SQUARE, frame=2**70),
+        lambda m: m.insert(2**70, SQUARE),
+        lambda m: m.insert_with_id(7, 1, SQUARE, frame=-(2**64)),
+        lambda m: m.merge(0, SQUARE, frame=2**64),
+        lambda m: m.replace(0, SQUARE, frame=2**64),
+        lambda m: m.merge_many([0], [SQUARE], frame=2**64),
+    ],
+    ids=[
+        "n_points_2**64",
+        "n_points_1e12",
+        "insert_frame",
+        "insert_cls",
+        "insert_with_id_frame",
+        "merge_frame",
+        "replace_frame",
+        "merge_many_frame",
+    ],
+)
+def test_integer_arguments_out_of_range_raise_value_error(call: Any) -> None:
+    """Integers that do not fit (or exceed a cap) raise ValueError naming the argument, not
+    pyo3's OverflowError or a panic; the map is unchanged."""
+    m = GlobalMap()
+    m.insert(1, LINE)
+    with pytest.raises(ValueError, match="n_points|frame|cls"):
+        call(m)
+    assert len(m) == 1 and m.info(0)["observations"] == 1
+
+
+def test_integer_arguments_accept_numpy_ints_and_refuse_floats() -> None:
+    m = GlobalMap()
+    i = m.insert(np.int8(1), LINE, frame=np.uint64(3))
+    assert m.info(i)["first_frame"] == 3
+    assert geom.resample(LINE, np.int32(5)).shape == (5, 2)
+    with pytest.raises(TypeError, match="frame"):
+        m.insert(1, LINE, frame=1.5)
+    with pytest.raises(TypeError, match="n"):
+        geom.resample(LINE, 5.0)
