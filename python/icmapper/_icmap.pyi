@@ -9,8 +9,9 @@ repeated), 1 divider, 2 boundary (open polylines).
 Errors: ``ValueError`` for bad values (NaN/inf, too few points, degenerate geometry, bad
 parameters, unknown class, wrong shapes, duplicate id, corrupt map file), ``TypeError`` for wrong
 types/dtypes (complex, object, str), ``KeyError`` for an unknown instance id, ``OSError`` (with the
-path as ``filename``; ``FileNotFoundError`` for a missing file) for I/O failures. Heavy work runs
-with the GIL released.
+path as ``filename``; ``FileNotFoundError`` for a missing file) for I/O failures. Integer arguments
+(counts, ``cls``, ``frame``) take Python or numpy ints; one that does not fit in 64 bits raises
+``ValueError`` naming the argument. Heavy work runs with the GIL released.
 """
 
 import os
@@ -33,7 +34,8 @@ def resample(points: ArrayLike2, n: int, closed: bool = False) -> F64:
 
     points: (m, 2), m >= 2. Open: first and last point kept, ``n >= 2``. Closed: ``n >= 3`` points
     along the contour including the closing edge, starting at the first point, not repeated.
-    Returns (n, 2) float64. ValueError on NaN/inf, fewer than 2 points, zero length or bad ``n``.
+    ``n`` is at most 10,000,000 (the output is allocated up front). Returns (n, 2) float64.
+    ValueError on NaN/inf, fewer than 2 points, zero length or bad ``n``.
     """
 
 def resample_spacing(points: ArrayLike2, spacing: float = 1.0, closed: bool = False) -> F64:

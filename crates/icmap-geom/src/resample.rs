@@ -6,8 +6,9 @@
 use crate::error::{GeomError, Result};
 use crate::types::{validate_points, Point};
 
-/// Largest number of points that [`resample_spacing`] produces (guards against `length / spacing`
-/// overflowing memory, e.g. a 1e300 m polyline at 1 m spacing).
+/// Largest number of points that [`resample`] and [`resample_spacing`] produce (guards against a
+/// huge `n` or `length / spacing` overflowing memory, e.g. `n = 10**12` or a 1e7 m polyline at
+/// 1 nm spacing).
 pub const MAX_RESAMPLE_POINTS: usize = 10_000_000;
 
 /// Total length of the polyline (for `closed`, including the closing edge).
@@ -127,9 +128,16 @@ fn with_closing(points: &[Point], closed: bool) -> Vec<Point> {
 /// Exactly `n` points evenly spaced by arc length.
 /// Open polyline: first and last point kept, `n >= 2`. Closed contour (`closed`): `n` points along
 /// the contour including the closing edge, starting at the first point, the first not repeated at
-/// the end, `n >= 3`. Errors on fewer than 2 points, non-finite values, zero length, bad `n`.
+/// the end, `n >= 3`. Errors on fewer than 2 points, non-finite values, zero length, bad `n`
+/// (below the minimum, or above [`MAX_RESAMPLE_POINTS`]: the output is allocated up front).
 pub fn resample(points: &[Point], n: usize, closed: bool) -> Result<Vec<Point>> {
     validate_points(points, 2, "polyline")?;
+    if n > MAX_RESAMPLE_POINTS {
+        return Err(GeomError::InvalidParameter {
+            name: "n",
+            reason: format!("must be at most {MAX_RESAMPLE_POINTS}, got {n}"),
+        });
+    }
     let min_n = if closed { 3 } else { 2 };
     if n < min_n {
         return Err(GeomError::InvalidParameter {
@@ -305,6 +313,22 @@ mod tests {
                 "{q:?} vs {w:?}"
             );
         }
+    }
+
+    /// Issue 14, point 2: `resample(pts, 10**12)` tried to allocate 8 TB and aborted the process,
+    /// `usize::MAX` panicked (capacity overflow); `n` is capped like `resample_spacing`'s count.
+    #[test]
+    fn resample_caps_n() {
+        let line = [p(0.0, 0.0), p(1.0, 0.0)];
+        for n in [MAX_RESAMPLE_POINTS + 1, 1_000_000_000_000, usize::MAX] {
+            for closed in [false, true] {
+                assert!(matches!(
+                    resample(&line, n, closed),
+                    Err(GeomError::InvalidParameter { name: "n", .. })
+                ));
+            }
+        }
+        assert_eq!(resample(&line, 1000, false).unwrap().len(), 1000);
     }
 
     #[test]

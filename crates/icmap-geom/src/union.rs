@@ -6,7 +6,7 @@
 use crate::clip::{open_ring, signed_area2};
 use crate::error::Result;
 use crate::types::{validate_points, Point};
-use geo::{BooleanOps, Coord, LineString, MultiPolygon, Polygon};
+use geo::{BooleanOps, Coord, LineString, MapCoordsInPlace, MultiPolygon, Polygon};
 
 /// Union of many polygons by pairwise unions in a balanced tree. geo's `unary_union` over all
 /// inputs at once was seen to take minutes on two dozen small, overlapping crossing pieces with
@@ -107,10 +107,8 @@ fn exterior_points(poly: &Polygon<f64>) -> Vec<Point> {
 /// Otherwise the general path goes on from the resolved rings (computed once), giving exactly
 /// what [`overlay_union`] gives.
 fn union_two_resolved(a: &[Point], b: &[Point]) -> Vec<Vec<Point>> {
-    let resolved: [Option<Vec<Polygon<f64>>>; 2] = [a, b].map(|r| {
-        (!crate::union_fast::ring_is_simple(r))
-            .then(|| geo::unary_union(std::iter::once(&to_polygon(r))).0)
-    });
+    let resolved: [Option<Vec<Polygon<f64>>>; 2] =
+        [a, b].map(|r| (!crate::union_fast::ring_is_simple(r)).then(|| resolve_ring(r)));
     if resolved.iter().any(Option::is_some) {
         if let Some(out) = union_pieces(a, b, &resolved) {
             return vec![out];
@@ -161,7 +159,61 @@ fn union_pieces(
 /// simple ring as it is would skip an overlay, but the result is snapped twice to different grids
 /// and then differs from this one by a grid step, sometimes starting at another vertex.)
 fn resolve_ring(ring: &[Point]) -> Vec<Polygon<f64>> {
-    geo::unary_union(std::iter::once(&to_polygon(ring))).0
+    let scale = overlay_scale(half_extent(ring.iter().map(|p| (p.x, p.y))));
+    if scale == 1.0 {
+        return geo::unary_union(std::iter::once(&to_polygon(ring))).0;
+    }
+    let scaled: Vec<Point> = ring.iter().map(|p| p * scale).collect();
+    let mut polys = geo::unary_union(std::iter::once(&to_polygon(&scaled))).0;
+    for p in &mut polys {
+        p.map_coords_in_place(|c| c / scale);
+    }
+    polys
+}
+
+/// i_overlay (under geo's `BooleanOps`) maps coordinates onto its integer grid with the scale
+/// `2^(29 - floor(log2(h)))`, `h` the half extent of the bounding box: below `h` of about 2^-994
+/// (1e-299 m) that power of two overflows to infinity and the overlay never returns (a crossing
+/// ring of 1e-299 m spun for 15 CPU-minutes). Geometry with a half extent below this bound
+/// (2^-900) goes through the overlay scaled by [`OVERLAY_SCALE_UP`] and is scaled back after.
+const OVERLAY_MIN_HALF_EXTENT: f64 = f64::from_bits((1023 - 900) << 52);
+/// 2^1000: a half extent in `[2^-1074, 2^-900)` becomes one in `[2^-74, 2^100)`, well inside the
+/// overlay's range. Coordinates are at most 2^53 half extents from the origin here (a larger one
+/// would have a coarser spacing than the extent), so none overflows. A power of two changes no
+/// digit of a normal number, and the overlay's own scale is a power of two: the result is the
+/// overlay's at a normal size, scaled.
+const OVERLAY_SCALE_UP: f64 = f64::from_bits((1023 + 1000) << 52);
+
+/// The factor by which geometry of bounding-box half extent `h` is scaled for the overlay (see
+/// [`OVERLAY_MIN_HALF_EXTENT`]): 1 unless `0 < h < 2^-900`.
+fn overlay_scale(h: f64) -> f64 {
+    if h > 0.0 && h < OVERLAY_MIN_HALF_EXTENT {
+        OVERLAY_SCALE_UP
+    } else {
+        1.0
+    }
+}
+
+/// Half the larger side of the bounding box of the coordinates (0 for none).
+fn half_extent(coords: impl Iterator<Item = (f64, f64)>) -> f64 {
+    let (mut x0, mut x1, mut y0, mut y1) = (
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+    );
+    for (x, y) in coords {
+        x0 = x0.min(x);
+        x1 = x1.max(x);
+        y0 = y0.min(y);
+        y1 = y1.max(y);
+    }
+    let h = 0.5 * (x1 - x0).max(y1 - y0);
+    if h.is_finite() {
+        h
+    } else {
+        0.0
+    }
 }
 
 /// The general path of [`polygon_union`] (validated input): geo's overlay.
@@ -176,8 +228,28 @@ fn overlay_union(rings: &[Vec<Point>]) -> Vec<Vec<Point>> {
 }
 
 /// The pairwise union of resolved polygons, as [`polygon_union`] returns it.
-fn union_of_resolved(polys: Vec<Polygon<f64>>) -> Vec<Vec<Point>> {
-    let union = balanced_union(polys.into_iter().map(|p| MultiPolygon(vec![p])).collect());
+fn union_of_resolved(mut polys: Vec<Polygon<f64>>) -> Vec<Vec<Point>> {
+    // Tiny geometry only (see OVERLAY_MIN_HALF_EXTENT): the overlay works on it scaled up.
+    let scale = overlay_scale(half_extent(
+        polys
+            .iter()
+            .flat_map(|p| {
+                p.exterior()
+                    .0
+                    .iter()
+                    .chain(p.interiors().iter().flat_map(|r| r.0.iter()))
+            })
+            .map(|c| (c.x, c.y)),
+    ));
+    if scale != 1.0 {
+        for p in &mut polys {
+            p.map_coords_in_place(|c| c * scale);
+        }
+    }
+    let mut union = balanced_union(polys.into_iter().map(|p| MultiPolygon(vec![p])).collect());
+    if scale != 1.0 {
+        union.map_coords_in_place(|c| c / scale);
+    }
     let mut out: Vec<(f64, Vec<Point>)> = Vec::new();
     for poly in union.0 {
         let mut ring = exterior_points(&poly);
@@ -825,6 +897,92 @@ mod tests {
         fn prop_no_panic_arbitrary(v in prop::collection::vec((any::<f64>(), any::<f64>()), 0..8)) {
             let ring: Vec<Point> = v.into_iter().map(|(x, y)| p(x, y)).collect();
             let _ = polygon_union(&[ring.clone(), rect(0.0, 0.0, 1.0, 1.0)]);
+        }
+    }
+
+    /// Runs `f` on its own thread and fails unless it returns within `secs` seconds (a hang
+    /// fails the test instead of freezing the suite; the thread is left behind).
+    fn within<T: Send + 'static>(secs: u64, f: impl FnOnce() -> T + Send + 'static) -> T {
+        let (tx, rx) = std::sync::mpsc::channel();
+        std::thread::spawn(move || {
+            let _ = tx.send(f());
+        });
+        rx.recv_timeout(std::time::Duration::from_secs(secs))
+            .expect("did not return in time")
+    }
+
+    /// Issue 14, point 1: a ring of ~1e-299 m made the overlay spin forever (its grid scale
+    /// overflowed). Now every union returns; a ring whose area underflows to zero contributes
+    /// nothing.
+    #[test]
+    #[allow(clippy::excessive_precision)] // the ring as the fuzzer found it
+    fn tiny_rings_return() {
+        let tiny = vec![
+            p(-4.1006077439108852e-299, 1.1037331569773797e-299),
+            p(-4.3541446871708736e-299, 7.2194332142851638e-300),
+            p(-4.2127516405641947e-299, 6.3347407334057527e-300),
+        ];
+        let sq = rect(0.0, 0.0, 1.0, 1.0);
+        let t1 = tiny.clone();
+        assert!(within(10, move || polygon_union(&[t1])).unwrap().is_empty());
+        let (t2, s2) = (tiny.clone(), sq.clone());
+        let u = within(10, move || polygon_union(&[t2, s2])).unwrap();
+        assert_eq!(u.len(), 1);
+        assert!((area(&u[0]) - 1.0).abs() < 1e-12);
+        let (t3, s3) = (tiny.clone(), sq.clone());
+        let shifted: Vec<Point> = sq.iter().map(|q| p(q.x + 0.5, q.y + 0.5)).collect();
+        let u = within(10, move || polygon_union(&[t3, s3, shifted])).unwrap();
+        assert_eq!(u.len(), 1);
+        assert!((area(&u[0]) - 1.75).abs() < 1e-12);
+        // Two overlapping squares and a bowtie at every scale down to the subnormals: the union
+        // returns, and while areas are representable it is the union at 1 m scaled (the
+        // overlay's result is scale-invariant up to its grid).
+        let shapes = |s: f64| {
+            (
+                [
+                    rect(0.0, 0.0, s, s),
+                    rect(0.5 * s, 0.5 * s, 1.5 * s, 1.5 * s),
+                ],
+                vec![p(0.0, 0.0), p(s, s), p(s, 0.0), p(0.0, s)],
+            )
+        };
+        let total = |u: &[Vec<Point>]| u.iter().map(|r| area(r)).sum::<f64>();
+        let (squares, bowtie) = shapes(1.0);
+        let (want_u, want_v) = (
+            total(&polygon_union(&squares).unwrap()),
+            total(&polygon_union(&[bowtie]).unwrap()),
+        );
+        assert!((want_u - 1.75).abs() < 1e-9 && want_v > 0.0);
+        for e in [
+            -30, -100, -150, -160, -200, -271, -272, -290, -299, -300, -305, -308, -312, -320,
+        ] {
+            let s = 10f64.powi(e);
+            let (squares, bowtie) = shapes(s);
+            let u = within(10, move || polygon_union(&squares)).unwrap();
+            let v = within(10, move || polygon_union(&[bowtie])).unwrap();
+            if e >= -150 {
+                assert_eq!(u.len(), 1, "scale 1e{e}");
+                assert!((total(&u) / (s * s) - want_u).abs() < 1e-6, "scale 1e{e}");
+                assert!((total(&v) / (s * s) - want_v).abs() < 1e-6, "scale 1e{e}");
+            }
+            assert!(u.iter().chain(&v).all(|r| r.len() >= 3 && area(r) > 0.0));
+        }
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(64))]
+
+        /// Rings at any scale from the subnormals to 1e7 m, one, two or three of them (the fast
+        /// path, the overlay, and the fast path's second try): every union returns in bounded
+        /// time, with rings of at least 3 points and positive area.
+        #[test]
+        fn prop_any_scale_returns(e in -325i32..7, shapes in prop::collection::vec(prop::collection::vec((-1.0f64..1.0, -1.0f64..1.0), 3..9), 1..4)) {
+            let s = 10f64.powi(e);
+            let rings: Vec<Vec<Point>> = shapes.iter().map(|r| r.iter().map(|&(x, y)| p(x * s, y * s)).collect()).collect();
+            // (A ring that repeats its first point may have too few points: an error, in time.)
+            if let Ok(u) = within(10, move || polygon_union(&rings)) {
+                prop_assert!(u.iter().all(|r| r.len() >= 3 && area(r) > 0.0));
+            }
         }
     }
 }

@@ -5,7 +5,7 @@ use icmap_geom::{Point, Pose2};
 use numpy::ndarray::{Array2, Array3, ArrayView2};
 use numpy::prelude::*;
 use numpy::{PyArray1, PyArray2, PyArray3, PyReadonlyArray2, PyUntypedArray};
-use pyo3::exceptions::{PyTypeError, PyValueError};
+use pyo3::exceptions::{PyOverflowError, PyTypeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::{PyList, PyTuple};
 
@@ -204,4 +204,43 @@ fn internal(err: impl std::fmt::Display) -> PyErr {
 /// A vector as a 1-D array.
 pub fn vec_to_py<T: numpy::Element>(py: Python<'_>, v: Vec<T>) -> Bound<'_, PyArray1<T>> {
     PyArray1::from_vec(py, v)
+}
+
+/// An integer argument (a Python int or anything with `__index__`, e.g. numpy ints). `TypeError`
+/// naming the argument for anything else; `ValueError` naming it when the int does not fit in 64
+/// bits (pyo3's own `OverflowError` names neither the argument nor the limit).
+pub fn int_arg(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<i64> {
+    match obj.extract::<i64>() {
+        Ok(v) => Ok(v),
+        Err(e) if e.is_instance_of::<PyOverflowError>(obj.py()) => Err(PyValueError::new_err(
+            format!("invalid parameter `{name}`: must fit in a signed 64-bit integer, got {obj}"),
+        )),
+        Err(_) => Err(PyTypeError::new_err(format!(
+            "expected an int for `{name}`, got {}",
+            obj.get_type().name()?
+        ))),
+    }
+}
+
+/// A count argument: [`int_arg`], and not negative (the core checks its own bounds).
+pub fn count_arg(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<usize> {
+    let n = int_arg(obj, name)?;
+    usize::try_from(n).map_err(|_| {
+        PyValueError::new_err(format!("invalid parameter `{name}`: must be >= 0, got {n}"))
+    })
+}
+
+/// `n` of `resample` (for `#[pyo3(from_py_with)]`).
+pub fn n_arg(obj: &Bound<'_, PyAny>) -> PyResult<usize> {
+    count_arg(obj, "n")
+}
+
+/// `n_points` of `sample_patch`.
+pub fn n_points_arg(obj: &Bound<'_, PyAny>) -> PyResult<usize> {
+    count_arg(obj, "n_points")
+}
+
+/// A `frame` number.
+pub fn frame_arg(obj: &Bound<'_, PyAny>) -> PyResult<i64> {
+    int_arg(obj, "frame")
 }

@@ -3,20 +3,12 @@
 use icmap_geom as geom;
 use icmap_geom::Patch;
 use numpy::PyArray2;
-use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 
 use crate::convert::{
-    extents_arg, matrix_to_py, point_sets_arg, points_arg, points_to_py, pose_arg,
+    extents_arg, matrix_to_py, n_arg, point_sets_arg, points_arg, points_to_py, pose_arg,
 };
 use crate::errors::IntoPyResult;
-
-/// A count argument that must not be negative (the core checks its own lower bound).
-pub fn count_arg(n: i64, name: &str) -> PyResult<usize> {
-    usize::try_from(n).map_err(|_| {
-        PyValueError::new_err(format!("invalid parameter `{name}`: must be >= 0, got {n}"))
-    })
-}
 
 fn list_of_arrays<'py>(
     py: Python<'py>,
@@ -31,11 +23,10 @@ fn list_of_arrays<'py>(
 pub fn resample<'py>(
     py: Python<'py>,
     points: &Bound<'py, PyAny>,
-    n: i64,
+    #[pyo3(from_py_with = n_arg)] n: usize,
     closed: bool,
 ) -> PyResult<Bound<'py, PyArray2<f64>>> {
     let pts = points_arg(points, "points")?;
-    let n = count_arg(n, "n")?;
     let out = py.detach(|| geom::resample(&pts, n, closed)).py_err()?;
     Ok(points_to_py(py, &out))
 }

@@ -12,10 +12,10 @@ use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyInt};
 
 use crate::convert::{
-    extents_arg, matrix_to_py, points3_f32_to_py, points_arg, points_to_py, pose_arg, vec_to_py,
+    extents_arg, frame_arg, int_arg, matrix_to_py, n_points_arg, points3_f32_to_py, points_arg,
+    points_to_py, pose_arg, vec_to_py,
 };
 use crate::errors::IntoPyResult;
-use crate::functions::count_arg;
 
 /// The global vector map (world frame): instances with bookkeeping and a spatial index.
 #[pyclass(frozen, module = "icmapper._icmap", name = "GlobalMap")]
@@ -44,8 +44,9 @@ fn id_arg(obj: &Bound<'_, PyAny>) -> PyResult<u64> {
     )))
 }
 
-fn class_arg(cls: i64) -> PyResult<MapClass> {
-    MapClass::try_from(cls).py_err()
+/// A class argument: an int naming one of the classes (`ValueError` for another int).
+fn class_arg(obj: &Bound<'_, PyAny>) -> PyResult<MapClass> {
+    MapClass::try_from(int_arg(obj, "cls")?).py_err()
 }
 
 impl PyGlobalMap {
@@ -111,13 +112,12 @@ impl PyGlobalMap {
     fn insert(
         &self,
         py: Python<'_>,
-        cls: i64,
+        #[pyo3(from_py_with = class_arg)] cls: MapClass,
         points: &Bound<'_, PyAny>,
-        frame: i64,
+        #[pyo3(from_py_with = frame_arg)] frame: i64,
     ) -> PyResult<u64> {
-        let class = class_arg(cls)?;
         let pts = points_arg(points, "points")?;
-        py.detach(|| self.write()?.insert(class, &pts, frame).py_err())
+        py.detach(|| self.write()?.insert(cls, &pts, frame).py_err())
     }
 
     /// Inserts with a caller-chosen id (ValueError if the id exists).
@@ -126,22 +126,17 @@ impl PyGlobalMap {
         &self,
         py: Python<'_>,
         id: &Bound<'_, PyAny>,
-        cls: i64,
+        #[pyo3(from_py_with = class_arg)] cls: MapClass,
         points: &Bound<'_, PyAny>,
-        frame: i64,
+        #[pyo3(from_py_with = frame_arg)] frame: i64,
     ) -> PyResult<()> {
         let id: u64 = id.extract().map_err(|_| {
             PyValueError::new_err(format!(
                 "id must be a non-negative integer below 2**64, got {id}"
             ))
         })?;
-        let class = class_arg(cls)?;
         let pts = points_arg(points, "points")?;
-        py.detach(|| {
-            self.write()?
-                .insert_with_id(id, class, &pts, frame)
-                .py_err()
-        })
+        py.detach(|| self.write()?.insert_with_id(id, cls, &pts, frame).py_err())
     }
 
     /// Merges a detection (world frame) into instance `id` by its class rule.
@@ -151,7 +146,7 @@ impl PyGlobalMap {
         py: Python<'_>,
         id: &Bound<'_, PyAny>,
         points: &Bound<'_, PyAny>,
-        frame: i64,
+        #[pyo3(from_py_with = frame_arg)] frame: i64,
     ) -> PyResult<()> {
         let id = id_arg(id)?;
         let pts = points_arg(points, "points")?;
@@ -183,7 +178,7 @@ impl PyGlobalMap {
         py: Python<'py>,
         ids: &Bound<'py, PyAny>,
         points: &Bound<'py, PyAny>,
-        frame: i64,
+        #[pyo3(from_py_with = frame_arg)] frame: i64,
     ) -> PyResult<Vec<Option<Bound<'py, PyAny>>>> {
         if ids.len().is_ok_and(|n| n >= 4) {
             geom::store::wake_merge_workers(); // they wake while the arguments are converted
@@ -235,7 +230,7 @@ impl PyGlobalMap {
         py: Python<'_>,
         id: &Bound<'_, PyAny>,
         points: &Bound<'_, PyAny>,
-        frame: i64,
+        #[pyo3(from_py_with = frame_arg)] frame: i64,
     ) -> PyResult<()> {
         let id = id_arg(id)?;
         let pts = points_arg(points, "points")?;
@@ -323,7 +318,7 @@ impl PyGlobalMap {
         pose: &Bound<'py, PyAny>,
         half_extents: &Bound<'py, PyAny>,
         margin: f64,
-        n_points: i64,
+        #[pyo3(from_py_with = n_points_arg)] n_points: usize,
     ) -> PyResult<(
         Bound<'py, PyArray1<u64>>,
         Bound<'py, PyArray1<i64>>,
@@ -333,8 +328,7 @@ impl PyGlobalMap {
         let pose = pose_arg(pose)?;
         let [hx, hy] = extents_arg(half_extents)?;
         let patch = Patch::new(pose, hx, hy, margin).py_err()?;
-        let n = count_arg(n_points, "n_points")?;
-        let s = py.detach(|| self.read()?.sample_patch(&patch, n).py_err())?;
+        let s = py.detach(|| self.read()?.sample_patch(&patch, n_points).py_err())?;
         let k = s.ids.len();
         let cls: Vec<i64> = s.classes.iter().map(|c| i64::from(c.index())).collect();
         let pts = points3_f32_to_py(py, &s.points, k, s.n_points)?;
