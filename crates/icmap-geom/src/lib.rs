@@ -17,6 +17,7 @@ pub mod index;
 pub mod merge;
 pub mod merge_map;
 pub mod persist;
+pub mod persist_v2;
 pub mod provenance;
 pub mod resample;
 pub mod store;
