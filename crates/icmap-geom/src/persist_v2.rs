@@ -46,11 +46,10 @@
 //! [`Encoding::Compact`] rounds them to a grid of [`QUANTUM`] = 0.1 mm, so a loaded coordinate
 //! differs from the saved one by at most 0.05 mm (plus float rounding, < 1e-9 m for coordinates
 //! below 10^5 m): densely sampled smooth polylines then take 2-3 bytes per point instead of 16.
-//! (An instance whose coordinates exceed 2^52 quanta is stored exactly in either encoding.)
+//! (An instance with a coordinate beyond 10^9 m is stored exactly in either encoding.)
 //! Loading a compact file and saving it compact again gives the same bytes.
 //!
-//! **Blocks.** Instances are ordered along a Hilbert curve of their bounding-box centres (ties by
-//! id) and cut into blocks of [`BLOCK_INSTANCES`]; [`load_region`] reads the header, the index
+//! **Blocks.** Instances are ordered along a Hilbert curve of their middle points (ties by id) and cut into blocks of [`BLOCK_INSTANCES`]; [`load_region`] reads the header, the index
 //! and only the blocks whose box meets the region, and keeps the instances whose own box meets
 //! it.
 //!
@@ -73,14 +72,17 @@ use std::path::Path;
 pub const FORMAT_VERSION_2: u32 = 2;
 /// Grid of [`Encoding::Compact`] coordinates, metres (0.1 mm).
 pub const QUANTUM: f64 = 1e-4;
+/// `1 / QUANTUM`: encoding multiplies by it.
+const INV_QUANTUM: f64 = 1e4;
 /// Instances per block (the granularity of region loading).
 pub const BLOCK_INSTANCES: usize = 256;
 
 const PREFIX: usize = 12;
 const HEADER: usize = 64;
 const INDEX_ENTRY: usize = 64;
-/// Largest |coordinate / quantum| stored quantised.
-const MAX_QUANTA: f64 = 4_503_599_627_370_496.0; // 2^52
+/// Largest |coordinate| (metres) stored quantised: 10^13 quanta, far inside the exact integers
+/// of f64, so rounding, decoding and re-encoding are exact to a fraction of a quantum.
+const MAX_QUANTISED: f64 = 1e9;
 
 /// How coordinates are stored.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -92,32 +94,58 @@ pub enum Encoding {
     Compact,
 }
 
-/// A fast 64-bit checksum: 8-byte little-endian words folded by `h = xorshift((h ^ w) * P)`, the
-/// tail zero-padded, the length mixed in first. Each step is a bijection of the state for a fixed
-/// word and of the word for a fixed state, so any change confined to one word is always detected.
+/// A fast 64-bit checksum: the 8-byte little-endian words (the tail zero-padded) are dealt to 4
+/// lanes in turn, each folding its words by `h = xorshift((h ^ w) * P)`; the lanes, the length
+/// and a final mix give the sum. Each step is a bijection of the lane for a fixed word and of the
+/// word for a fixed lane, and the lanes are combined by xor of bijections, so any change confined
+/// to one word is always detected.
 pub fn hash64(bytes: &[u8]) -> u64 {
     const P: u64 = 0x0000_0100_0000_01b3;
-    let mut h: u64 = 0xcbf2_9ce4_8422_2325 ^ (bytes.len() as u64).wrapping_mul(P);
-    let mut step = |w: u64| {
-        h = (h ^ w).wrapping_mul(P);
-        h ^= h >> 29;
-    };
-    let mut chunks = bytes.chunks_exact(8);
-    for c in &mut chunks {
-        step(u64::from_le_bytes(c.try_into().expect("8 bytes")));
+    #[inline(always)]
+    fn step(h: u64, w: u64) -> u64 {
+        let h = (h ^ w).wrapping_mul(P);
+        h ^ (h >> 29)
     }
-    let rest = chunks.remainder();
-    if !rest.is_empty() {
+    let word = |c: &[u8]| u64::from_le_bytes(c.try_into().expect("8 bytes"));
+    let mut lanes: [u64; 4] = [
+        0xcbf2_9ce4_8422_2325,
+        0x9e37_79b9_7f4a_7c15,
+        0xbf58_476d_1ce4_e5b9,
+        0x94d0_49bb_1331_11eb,
+    ];
+    let mut quads = bytes.chunks_exact(32);
+    for q in &mut quads {
+        for (k, lane) in lanes.iter_mut().enumerate() {
+            *lane = step(*lane, word(&q[8 * k..8 * k + 8]));
+        }
+    }
+    let rest = quads.remainder();
+    let mut words = rest.chunks_exact(8);
+    let mut k = 0;
+    for c in &mut words {
+        lanes[k] = step(lanes[k], word(c));
+        k += 1;
+    }
+    if !words.remainder().is_empty() {
         let mut last = [0u8; 8];
-        last[..rest.len()].copy_from_slice(rest);
-        step(u64::from_le_bytes(last));
+        last[..words.remainder().len()].copy_from_slice(words.remainder());
+        lanes[k] = step(lanes[k], u64::from_le_bytes(last));
     }
-    h
+    let mut h = step(0x2545_f491_4f6c_dd1d, bytes.len() as u64);
+    for (k, lane) in lanes.iter().enumerate() {
+        h ^= step(*lane, k as u64).rotate_left(16 * k as u32);
+    }
+    step(h, 0)
 }
 
 // ------------------------------------------------------------------------------------ writing
 
+#[inline]
 fn put_varint(out: &mut Vec<u8>, mut v: u64) {
+    if v < 0x80 {
+        out.push(v as u8);
+        return;
+    }
     while v >= 0x80 {
         out.push((v as u8) | 0x80);
         v >>= 7;
@@ -165,7 +193,16 @@ fn hilbert_key(p: &Point, extent: &Aabb) -> u64 {
 fn quantisable(points: &[Point]) -> bool {
     points
         .iter()
-        .all(|p| (p.x / QUANTUM).abs() < MAX_QUANTA && (p.y / QUANTUM).abs() < MAX_QUANTA)
+        .all(|p| p.x.abs() < MAX_QUANTISED && p.y.abs() < MAX_QUANTISED)
+}
+
+/// `v` rounded to the nearest integer, halves away from zero (`f64::round`, without the libm
+/// call), for `|v| < 2^52`.
+#[inline]
+fn round_i64(v: f64) -> i64 {
+    let t = v as i64;
+    let r = v - t as f64;
+    t + i64::from(r >= 0.5) - i64::from(r <= -0.5)
 }
 
 /// Appends the record of `inst`; returns the bounding box of its coordinates as they will be
@@ -184,6 +221,7 @@ fn encode_instance(out: &mut Vec<u8>, inst: &Instance, drives: &[u32], encoding:
         prev = Some(d);
     }
     put_varint(out, inst.points.len() as u64);
+    out.reserve(if quantised { 6 } else { 16 } * inst.points.len());
     if !quantised {
         for p in &inst.points {
             out.extend_from_slice(&p.x.to_le_bytes());
@@ -197,10 +235,7 @@ fn encode_instance(out: &mut Vec<u8>, inst: &Instance, drives: &[u32], encoding:
     );
     let (mut x1, mut y1, mut x2, mut y2) = (0i64, 0i64, 0i64, 0i64);
     for (i, p) in inst.points.iter().enumerate() {
-        let (x, y) = (
-            (p.x / QUANTUM).round() as i64,
-            (p.y / QUANTUM).round() as i64,
-        );
+        let (x, y) = (round_i64(p.x * INV_QUANTUM), round_i64(p.y * INV_QUANTUM));
         let (px, py) = match i {
             0 => (0, 0),
             1 => (x1, y1),
@@ -221,29 +256,49 @@ fn encode_instance(out: &mut Vec<u8>, inst: &Instance, drives: &[u32], encoding:
 
 /// The map file contents of `map` in format version 2.
 pub fn to_bytes(map: &GlobalMap, encoding: Encoding) -> Vec<u8> {
-    let mut instances: Vec<(&Instance, Aabb)> =
-        map.instances_iter().map(|i| (i, i.aabb())).collect();
-    let extent = instances
+    // Each instance with its drives: both tables read in id order (a merge join, no hash lookups).
+    let mut by_id: Vec<(u64, &Instance)> = map.instances_iter().map(|i| (i.id, i)).collect();
+    by_id.sort_unstable_by_key(|x| x.0);
+    let mut drive_lists: Vec<(u64, &[u32])> =
+        map.drives.iter().map(|(&id, d)| (id, &d[..])).collect();
+    drive_lists.sort_unstable_by_key(|x| x.0);
+    let mut lists = drive_lists.iter().peekable();
+    let items: Vec<(&Instance, &[u32])> = by_id
         .iter()
-        .map(|(_, b)| *b)
-        .reduce(|a, b| a.merged(&b))
+        .map(|&(id, inst)| {
+            while lists.next_if(|x| x.0 < id).is_some() {}
+            let drives = lists.next_if(|x| x.0 == id).map_or(&[][..], |x| x.1);
+            (inst, drives)
+        })
+        .collect();
+    drop((by_id, drive_lists));
+    // Hilbert order of a middle point of each instance (ties by id).
+    let anchor = |i: &Instance| i.points[i.points.len() / 2];
+    let extent = items
+        .iter()
+        .map(|(i, _)| anchor(i))
+        .fold(None, |acc: Option<Aabb>, q| {
+            Some(acc.map_or(Aabb::new(q, q), |b| {
+                Aabb::new(b.mins.inf(&q), b.maxs.sup(&q))
+            }))
+        })
         .unwrap_or_else(|| Aabb::new(Point::origin(), Point::origin()));
-    let mut keyed: Vec<(u64, u64, usize)> = instances
+    let mut keyed: Vec<(u64, u64, usize)> = items
         .iter()
         .enumerate()
-        .map(|(k, (i, b))| (hilbert_key(&b.center(), &extent), i.id, k))
+        .map(|(k, (i, _))| (hilbert_key(&anchor(i), &extent), i.id, k))
         .collect();
     keyed.sort_unstable();
-    let order: Vec<(&Instance, Aabb)> = keyed.iter().map(|&(_, _, k)| instances[k]).collect();
-    instances.clear();
+    let order: Vec<(&Instance, &[u32])> = keyed.iter().map(|&(_, _, k)| items[k]).collect();
+    drop((items, keyed));
     // Blocks, encoded in parallel: (bytes, box, count).
     let blocks: Vec<(Vec<u8>, Aabb, usize)> = order
         .par_chunks(BLOCK_INSTANCES)
         .map(|chunk| {
             let mut out = Vec::with_capacity(chunk.len() * 64);
             let mut bbox: Option<Aabb> = None;
-            for (inst, _) in chunk {
-                let b = encode_instance(&mut out, inst, map.drives(inst.id), encoding);
+            for (inst, drives) in chunk {
+                let b = encode_instance(&mut out, inst, drives, encoding);
                 bbox = Some(bbox.map_or(b, |x| x.merged(&b)));
             }
             let bbox = bbox.expect("a block has instances");
@@ -320,8 +375,15 @@ impl<'a> Cursor<'a> {
         self.pos += n;
         Ok(s)
     }
+    #[inline]
     fn u8(&mut self, what: &str) -> Parse<u8> {
-        Ok(self.take(1, what)?[0])
+        match self.bytes.get(self.pos) {
+            Some(&b) => {
+                self.pos += 1;
+                Ok(b)
+            }
+            None => Err(self.take(1, what).err().unwrap_or_default()),
+        }
     }
     fn u64(&mut self, what: &str) -> Parse<u64> {
         Ok(u64::from_le_bytes(
@@ -333,7 +395,21 @@ impl<'a> Cursor<'a> {
             self.take(8, what)?.try_into().expect("8 bytes"),
         ))
     }
+    #[inline]
     fn varint(&mut self, what: &str) -> Parse<u64> {
+        match self.bytes.get(self.pos..self.pos + 2) {
+            Some(&[b0, _]) if b0 < 0x80 => {
+                self.pos += 1;
+                Ok(u64::from(b0))
+            }
+            Some(&[b0, b1]) if b1 < 0x80 => {
+                self.pos += 2;
+                Ok(u64::from(b0 & 0x7f) | (u64::from(b1) << 7))
+            }
+            _ => self.varint_long(what),
+        }
+    }
+    fn varint_long(&mut self, what: &str) -> Parse<u64> {
         let mut v: u64 = 0;
         for k in 0..10 {
             let b = self.u8(what)?;
@@ -502,8 +578,9 @@ fn parse_head(bytes: &[u8]) -> Parse<Head> {
     parse_index(&bytes[..head_len], head, n_blocks)
 }
 
-/// An instance as decoded, with its drives.
+/// An instance as decoded, with its drives (and, once checked, its bounding box).
 type Decoded = (Instance, Vec<u32>);
+type Checked = (Instance, Vec<u32>, Aabb);
 
 fn decode_instance(c: &mut Cursor<'_>, quantum: f64) -> Parse<Decoded> {
     let id = c.varint("instance id")?;
@@ -588,7 +665,7 @@ fn decode_block(
     bytes: &[u8],
     quantum: f64,
     region: Option<&Aabb>,
-) -> Parse<Vec<Decoded>> {
+) -> Parse<Vec<Checked>> {
     let computed = hash64(bytes);
     if computed != e.sum {
         return Err(format!(
@@ -605,9 +682,7 @@ fn decode_block(
     for _ in 0..e.count {
         let (inst, drives) =
             decode_instance(&mut c, quantum).map_err(|m| format!("block {k}: {m}"))?;
-        if inst.points.is_empty() {
-            return Err(format!("block {k}: instance {} has no points", inst.id));
-        }
+        inst.validate().map_err(|e| format!("block {k}: {e}"))?;
         let b = inst.aabb();
         if !bbox.contains(&b) {
             return Err(format!(
@@ -616,7 +691,7 @@ fn decode_block(
             ));
         }
         if region.is_none_or(|r| r.intersects(&b)) {
-            out.push((inst, drives));
+            out.push((inst, drives, b));
         }
     }
     if c.remaining() != 0 {
@@ -631,20 +706,24 @@ fn decode_block(
 
 /// Builds the map from decoded instances (the store's checks: invariants, unique ids, ids below
 /// next_id).
-fn assemble(head: &Head, decoded: Vec<Decoded>) -> Parse<GlobalMap> {
+fn assemble(head: &Head, blocks: Vec<Vec<Checked>>) -> Parse<GlobalMap> {
     head.config
         .validate()
         .map_err(|e| format!("bad config: {e}"))?;
+    let n = blocks.iter().map(Vec::len).sum();
     let mut drive_lists = Vec::new();
-    let mut instances = Vec::with_capacity(decoded.len());
-    for (inst, drives) in decoded {
+    let mut instances = Vec::with_capacity(n);
+    let mut boxes = Vec::with_capacity(n);
+    for (inst, drives, b) in blocks.into_iter().flatten() {
         if !drives.is_empty() {
             drive_lists.push((inst.id, drives.into_boxed_slice()));
         }
         instances.push(inst);
+        boxes.push(b);
     }
-    let mut map =
-        GlobalMap::from_parts(head.config, head.next_id, instances).map_err(|e| e.to_string())?;
+    let mut map = GlobalMap::from_checked_parts(head.config, head.next_id, instances, boxes)
+        .map_err(|e| e.to_string())?;
+    map.drives.reserve(drive_lists.len());
     map.drives.extend(drive_lists);
     Ok(map)
 }
@@ -688,20 +767,27 @@ fn with_path(e: GeomError, path: &str) -> GeomError {
     }
 }
 
-fn parse_any(bytes: &[u8], path: &str, region: Option<&Aabb>) -> Result<GlobalMap> {
+/// A file's contents decoded: a map (version 1) or the head and the decoded blocks (version 2,
+/// assembled once the file's bytes are dropped).
+enum Parsed {
+    Map(Box<GlobalMap>),
+    Blocks(Head, Vec<Vec<Checked>>),
+}
+
+fn decode_any(bytes: &[u8], path: &str, region: Option<&Aabb>) -> Result<Parsed> {
     let fmt = format_error(path);
     match version_of(bytes).map_err(&fmt)? {
         1 => {
             let map = crate::persist::from_bytes(bytes).map_err(|e| with_path(e, path))?;
-            Ok(match region {
+            Ok(Parsed::Map(Box::new(match region {
                 None => map,
                 Some(r) => filter_region(map, r),
-            })
+            })))
         }
         FORMAT_VERSION_2 => {
             let head = parse_head(bytes).map_err(&fmt)?;
             let start = head.len() as usize;
-            let decoded: Vec<Parse<Vec<Decoded>>> = head
+            let decoded: Parse<Vec<Vec<Checked>>> = head
                 .blocks
                 .par_iter()
                 .enumerate()
@@ -711,16 +797,23 @@ fn parse_any(bytes: &[u8], path: &str, region: Option<&Aabb>) -> Result<GlobalMa
                     decode_block(k, e, &bytes[at..at + e.len as usize], head.quantum, region)
                 })
                 .collect();
-            let mut all = Vec::with_capacity(head.count.min(bytes.len() as u64) as usize);
-            for d in decoded {
-                all.extend(d.map_err(&fmt)?);
-            }
-            assemble(&head, all).map_err(&fmt)
+            Ok(Parsed::Blocks(head, decoded.map_err(&fmt)?))
         }
         v => Err(fmt(format!(
             "unsupported format version {v} (this build reads versions 1 and 2; the file may come from a newer icmapper)"
         ))),
     }
+}
+
+fn finish(parsed: Parsed, path: &str) -> Result<GlobalMap> {
+    match parsed {
+        Parsed::Map(map) => Ok(*map),
+        Parsed::Blocks(head, blocks) => assemble(&head, blocks).map_err(format_error(path)),
+    }
+}
+
+fn parse_any(bytes: &[u8], path: &str, region: Option<&Aabb>) -> Result<GlobalMap> {
+    finish(decode_any(bytes, path, region)?, path)
 }
 
 fn entry_box(e: &BlockEntry) -> Aabb {
@@ -757,7 +850,9 @@ pub fn load(path: &Path) -> Result<GlobalMap> {
         path: name.clone(),
         source,
     })?;
-    parse_any(&bytes, &name, None)
+    let parsed = decode_any(&bytes, &name, None)?;
+    drop(bytes);
+    finish(parsed, &name)
 }
 
 /// A region `(xmin, ymin, xmax, ymax)` as a box: no NaN, `xmin <= xmax`, `ymin <= ymax`
@@ -812,7 +907,7 @@ pub fn load_region(path: &Path, region: [f64; 4]) -> Result<GlobalMap> {
     f.read_exact(&mut head_bytes[PREFIX + HEADER..])
         .map_err(io)?;
     let head = parse_index(&head_bytes, head, n_blocks).map_err(&fmt)?;
-    let mut all = Vec::new();
+    let mut blocks = Vec::new();
     let mut buf = Vec::new();
     for (k, e) in head.blocks.iter().enumerate() {
         if !region.intersects(&entry_box(e)) {
@@ -821,9 +916,9 @@ pub fn load_region(path: &Path, region: [f64; 4]) -> Result<GlobalMap> {
         f.seek(SeekFrom::Start(head.len() + e.offset)).map_err(io)?;
         buf.resize(e.len as usize, 0);
         f.read_exact(&mut buf).map_err(io)?;
-        all.extend(decode_block(k, e, &buf, head.quantum, Some(&region)).map_err(&fmt)?);
+        blocks.push(decode_block(k, e, &buf, head.quantum, Some(&region)).map_err(&fmt)?);
     }
-    assemble(&head, all).map_err(&fmt)
+    assemble(&head, blocks).map_err(&fmt)
 }
 
 #[cfg(test)]
@@ -878,7 +973,7 @@ mod tests {
                 (i64::MIN, i64::MAX),
                 u32::MAX,
             ),
-            // Beyond 2^52 quanta: stored exactly in either encoding.
+            // Beyond 10^9 m: stored exactly in either encoding.
             inst(
                 7,
                 MapClass::Boundary,

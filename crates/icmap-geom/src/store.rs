@@ -255,6 +255,7 @@ impl GlobalMap {
             });
         }
         map.slots.reserve(instances.len());
+        map.id_to_slot.reserve(instances.len());
         for inst in instances {
             inst.validate()?;
             if inst.id >= next_id {
@@ -276,6 +277,42 @@ impl GlobalMap {
                 .enumerate()
                 .filter_map(|(s, i)| i.as_ref().map(|i| (s as u32, i.aabb()))),
         );
+        Ok(map)
+    }
+
+    /// [`Self::from_parts`] for instances the caller has validated (`Instance::validate`) and
+    /// whose bounding boxes it passes in `boxes` (crate use: loading, which does both in
+    /// parallel); ids are still checked here (unique, below `next_id`).
+    pub(crate) fn from_checked_parts(
+        config: MapConfig,
+        next_id: u64,
+        instances: Vec<Instance>,
+        boxes: Vec<Aabb>,
+    ) -> Result<Self> {
+        let mut map = GlobalMap::new(config)?;
+        if instances.len() > u32::MAX as usize || boxes.len() != instances.len() {
+            return Err(GeomError::InvalidParameter {
+                name: "instances",
+                reason: "more than 2^32 - 1 instances, or not one box per instance".into(),
+            });
+        }
+        map.slots.reserve(instances.len());
+        map.id_to_slot.reserve(instances.len());
+        for inst in instances {
+            if inst.id >= next_id {
+                return Err(GeomError::InvalidParameter {
+                    name: "next_id",
+                    reason: format!("instance id {} is not below next_id {next_id}", inst.id),
+                });
+            }
+            let slot = map.slots.len() as u32;
+            if map.id_to_slot.insert(inst.id, slot).is_some() {
+                return Err(GeomError::DuplicateId(inst.id));
+            }
+            map.slots.push(Some(inst));
+        }
+        map.next_id = next_id;
+        map.index = SpatialIndex::from_boxes((0u32..).zip(boxes));
         Ok(map)
     }
 
