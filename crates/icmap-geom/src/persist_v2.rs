@@ -711,17 +711,14 @@ fn assemble(head: &Head, blocks: Vec<Vec<Checked>>) -> Parse<GlobalMap> {
         .validate()
         .map_err(|e| format!("bad config: {e}"))?;
     let n = blocks.iter().map(Vec::len).sum();
-    let mut drive_lists = Vec::new();
-    let mut instances = Vec::with_capacity(n);
-    let mut boxes = Vec::with_capacity(n);
-    for (inst, drives, b) in blocks.into_iter().flatten() {
+    let mut drive_lists = Vec::with_capacity(n);
+    let items = blocks.into_iter().flatten().map(|(inst, drives, b)| {
         if !drives.is_empty() {
             drive_lists.push((inst.id, drives.into_boxed_slice()));
         }
-        instances.push(inst);
-        boxes.push(b);
-    }
-    let mut map = GlobalMap::from_checked_parts(head.config, head.next_id, instances, boxes)
+        (inst, b)
+    });
+    let mut map = GlobalMap::from_checked_parts(head.config, head.next_id, n, items)
         .map_err(|e| e.to_string())?;
     map.drives.reserve(drive_lists.len());
     map.drives.extend(drive_lists);

@@ -280,25 +280,26 @@ impl GlobalMap {
         Ok(map)
     }
 
-    /// [`Self::from_parts`] for instances the caller has validated (`Instance::validate`) and
-    /// whose bounding boxes it passes in `boxes` (crate use: loading, which does both in
-    /// parallel); ids are still checked here (unique, below `next_id`).
+    /// [`Self::from_parts`] for `n` instances the caller has validated (`Instance::validate`),
+    /// each with its bounding box (crate use: loading, which does both in parallel); ids are
+    /// still checked here (unique, below `next_id`).
     pub(crate) fn from_checked_parts(
         config: MapConfig,
         next_id: u64,
-        instances: Vec<Instance>,
-        boxes: Vec<Aabb>,
+        n: usize,
+        items: impl IntoIterator<Item = (Instance, Aabb)>,
     ) -> Result<Self> {
         let mut map = GlobalMap::new(config)?;
-        if instances.len() > u32::MAX as usize || boxes.len() != instances.len() {
+        if n > u32::MAX as usize {
             return Err(GeomError::InvalidParameter {
                 name: "instances",
-                reason: "more than 2^32 - 1 instances, or not one box per instance".into(),
+                reason: "more than 2^32 - 1 instances".into(),
             });
         }
-        map.slots.reserve(instances.len());
-        map.id_to_slot.reserve(instances.len());
-        for inst in instances {
+        map.slots.reserve(n);
+        map.id_to_slot.reserve(n);
+        let mut boxes = Vec::with_capacity(n);
+        for (inst, aabb) in items {
             if inst.id >= next_id {
                 return Err(GeomError::InvalidParameter {
                     name: "next_id",
@@ -306,13 +307,20 @@ impl GlobalMap {
                 });
             }
             let slot = map.slots.len() as u32;
+            if slot == u32::MAX {
+                return Err(GeomError::InvalidParameter {
+                    name: "instances",
+                    reason: "more than 2^32 - 1 instances".into(),
+                });
+            }
             if map.id_to_slot.insert(inst.id, slot).is_some() {
                 return Err(GeomError::DuplicateId(inst.id));
             }
             map.slots.push(Some(inst));
+            boxes.push((slot, aabb));
         }
         map.next_id = next_id;
-        map.index = SpatialIndex::from_boxes((0u32..).zip(boxes));
+        map.index = SpatialIndex::from_boxes(boxes);
         Ok(map)
     }
 
