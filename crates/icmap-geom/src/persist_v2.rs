@@ -256,41 +256,46 @@ fn encode_instance(out: &mut Vec<u8>, inst: &Instance, drives: &[u32], encoding:
 
 /// The map file contents of `map` in format version 2.
 pub fn to_bytes(map: &GlobalMap, encoding: Encoding) -> Vec<u8> {
-    // Each instance with its drives: both tables read in id order (a merge join, no hash lookups).
-    let mut by_id: Vec<(u64, &Instance)> = map.instances_iter().map(|i| (i.id, i)).collect();
-    by_id.sort_unstable_by_key(|x| x.0);
+    // Instances in storage order (their data is read in memory order where possible).
+    let insts: Vec<&Instance> = map.instances_iter().collect();
+    // Each instance's drives: a merge join of (id, position) and the provenance table, both
+    // sorted by id (no hash lookups, no visits to the instances' points).
+    let mut by_id: Vec<(u64, usize)> = insts.iter().enumerate().map(|(k, i)| (i.id, k)).collect();
+    by_id.sort_unstable();
     let mut drive_lists: Vec<(u64, &[u32])> =
         map.drives.iter().map(|(&id, d)| (id, &d[..])).collect();
     drive_lists.sort_unstable_by_key(|x| x.0);
+    let mut drives_of: Vec<&[u32]> = vec![&[]; insts.len()];
     let mut lists = drive_lists.iter().peekable();
-    let items: Vec<(&Instance, &[u32])> = by_id
-        .iter()
-        .map(|&(id, inst)| {
-            while lists.next_if(|x| x.0 < id).is_some() {}
-            let drives = lists.next_if(|x| x.0 == id).map_or(&[][..], |x| x.1);
-            (inst, drives)
-        })
-        .collect();
+    for &(id, k) in &by_id {
+        while lists.next_if(|x| x.0 < id).is_some() {}
+        if let Some(x) = lists.next_if(|x| x.0 == id) {
+            drives_of[k] = x.1;
+        }
+    }
     drop((by_id, drive_lists));
     // Hilbert order of a middle point of each instance (ties by id).
-    let anchor = |i: &Instance| i.points[i.points.len() / 2];
-    let extent = items
+    let anchors: Vec<Point> = insts.iter().map(|i| i.points[i.points.len() / 2]).collect();
+    let extent = anchors
         .iter()
-        .map(|(i, _)| anchor(i))
         .fold(None, |acc: Option<Aabb>, q| {
-            Some(acc.map_or(Aabb::new(q, q), |b| {
-                Aabb::new(b.mins.inf(&q), b.maxs.sup(&q))
+            Some(acc.map_or(Aabb::new(*q, *q), |b| {
+                Aabb::new(b.mins.inf(q), b.maxs.sup(q))
             }))
         })
         .unwrap_or_else(|| Aabb::new(Point::origin(), Point::origin()));
-    let mut keyed: Vec<(u64, u64, usize)> = items
+    let mut keyed: Vec<(u64, u64, usize)> = anchors
         .iter()
+        .zip(&insts)
         .enumerate()
-        .map(|(k, (i, _))| (hilbert_key(&anchor(i), &extent), i.id, k))
+        .map(|(k, (q, i))| (hilbert_key(q, &extent), i.id, k))
         .collect();
     keyed.sort_unstable();
-    let order: Vec<(&Instance, &[u32])> = keyed.iter().map(|&(_, _, k)| items[k]).collect();
-    drop((items, keyed));
+    let order: Vec<(&Instance, &[u32])> = keyed
+        .iter()
+        .map(|&(_, _, k)| (insts[k], drives_of[k]))
+        .collect();
+    drop((insts, drives_of, anchors, keyed));
     // Blocks, encoded in parallel: (bytes, box, count).
     let blocks: Vec<(Vec<u8>, Aabb, usize)> = order
         .par_chunks(BLOCK_INSTANCES)
