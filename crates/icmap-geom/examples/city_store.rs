@@ -124,6 +124,31 @@ fn secs(t: Instant) -> f64 {
     t.elapsed().as_secs_f64()
 }
 
+/// This process's (user, kernel) CPU seconds so far, from `/proc/self/stat` (Linux; zeros
+/// elsewhere). The kernel share of a save or load is mostly first-touch page faults of fresh
+/// memory, which on a shared VM vary from run to run far more than the program's own work.
+fn cpu_times() -> (f64, f64) {
+    let Ok(stat) = std::fs::read_to_string("/proc/self/stat") else {
+        return (0.0, 0.0);
+    };
+    // Fields after the command name (which is in parentheses): utime and stime are fields 14
+    // and 15 of the whole line, in clock ticks (100 per second on Linux).
+    let rest = stat.rsplit(')').next().unwrap_or("");
+    let f: Vec<&str> = rest.split_whitespace().collect();
+    let tick = |i: usize| f.get(i).and_then(|v| v.parse::<f64>().ok()).unwrap_or(0.0) / 100.0;
+    (tick(11), tick(12))
+}
+
+/// Runs `f`, returning its result, wall seconds and (user, kernel) CPU seconds.
+fn timed<T>(f: impl FnOnce() -> T) -> (T, f64, (f64, f64)) {
+    let (u0, k0) = cpu_times();
+    let t = Instant::now();
+    let out = f();
+    let wall = secs(t);
+    let (u1, k1) = cpu_times();
+    (out, wall, (u1 - u0, k1 - k0))
+}
+
 fn file_len(path: &Path) -> u64 {
     std::fs::metadata(path).map(|m| m.len()).unwrap_or(0)
 }
@@ -156,13 +181,11 @@ fn store(n: usize, dir: &Path) -> Result<(), String> {
         v1_save + v1_load
     );
     for encoding in [Encoding::Exact, Encoding::Compact] {
-        let t = Instant::now();
-        persist_v2::save(&map, &path, encoding).map_err(err)?;
-        let save = secs(t);
+        let (r, save, save_cpu) = timed(|| persist_v2::save(&map, &path, encoding));
+        r.map_err(err)?;
         let size = file_len(&path);
-        let t = Instant::now();
-        let back = persist_v2::load(&path).map_err(err)?;
-        let load = secs(t);
+        let (back, load, load_cpu) = timed(|| persist_v2::load(&path));
+        let back = back.map_err(err)?;
         assert_eq!(back.len(), n);
         drop(back);
         println!(
@@ -172,6 +195,10 @@ fn store(n: usize, dir: &Path) -> Result<(), String> {
             size as f64 / n as f64,
             save + load,
             size as f64 / v1_size as f64
+        );
+        println!(
+            "                  CPU (user + kernel) s: save {:.2} + {:.2}, load {:.2} + {:.2}",
+            save_cpu.0, save_cpu.1, load_cpu.0, load_cpu.1
         );
     }
     // Region loading from the compact file: a 500 x 500 m square in the middle of the city.
