@@ -111,6 +111,7 @@ def test_insert_get_info_remove() -> None:
         "last_frame": 3,
         "observations": 1,
         "n_points": pts.shape[0],
+        "drives": [],
     }
     m.remove(i0)
     assert i0 not in m and len(m) == 1

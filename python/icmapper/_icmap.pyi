@@ -107,6 +107,12 @@ class InstanceInfo(TypedDict):
     last_frame: int
     observations: int
     n_points: int
+    drives: list[int]  # ascending ids of the drives that observed the instance (provenance)
+
+class MergeMapStats(TypedDict):
+    merged: int  # instances of ``other`` merged into instances of this map
+    inserted: int  # instances of ``other`` inserted with fresh ids
+    absorbed: int  # instances of this map joined into another of this map (removed)
 
 class GlobalMap:
     """The global vector map (world frame): instances, bookkeeping and a spatial index.
@@ -171,7 +177,36 @@ class GlobalMap:
         """``(cls, points (n, 2) float64)`` of instance ``id``; KeyError if absent."""
 
     def info(self, id: int) -> InstanceInfo:
-        """Bookkeeping of instance ``id``; KeyError if absent."""
+        """Bookkeeping of instance ``id`` (with ``drives``, its provenance); KeyError if absent."""
+
+    def tag_drive(self, drive: int, ids: Sequence[int] | None = None) -> None:
+        """Records that drive ``drive`` (an int in 0..2**32 - 1; ValueError outside) observed every
+        instance now in the map, or only the instances ``ids`` (KeyError for an unknown id; then
+        nothing changes): ``info(id)["drives"]`` then contains it."""
+
+    def merge_map(
+        self, other: GlobalMap, gate: float = 1.5, min_overlap: float = 0.5
+    ) -> MergeMapStats:
+        """Merges every instance of ``other`` into this map; ``other`` is unchanged.
+
+        Candidates: the instances of this map (as it was before the call) of the same class whose
+        bounding box meets the other instance's box grown by ``gate`` (the spatial index). Overlap
+        test: with ``s(B, A)`` the share of B's points within ``gate`` metres of A's geometry (its
+        polyline; for a crossing its ring, 0 inside), A and B overlap when ``max(s(B, A),
+        s(A, B)) >= min_overlap``. Each connected group of overlapping instances becomes one
+        instance (an instance of ``other`` overlapping two of this map joins them; two of
+        ``other`` are joined only through one of this map), merged from its largest member in
+        breadth-first order of the overlaps (larger share, then smaller mean distance, then lower
+        id) by the class rules: the curve-fit merge (``merge_polyline`` with this map's smoothing
+        and spacing) for polylines, polygon union for crossings. It keeps the lowest id of its
+        instances of this map; its drives are the union, its observations the sum, its first /
+        last frame the min / max of its members'. The other instances of ``other`` are inserted
+        with fresh ids (ascending id order of ``other``), geometry and bookkeeping copied.
+        Deterministic; the order in which drive maps are merged changes the result only within
+        the drives' disagreement (tested: map Chamfer per class <= 0.25 m for drives offset by
+        up to 0.14 m). ValueError for ``gate`` not finite or < 0, ``min_overlap`` outside (0, 1];
+        TypeError if ``other`` is not a GlobalMap. The GIL is released (the overlap tests and
+        the groups' merges run in parallel)."""
 
     def ids(self) -> npt.NDArray[np.uint64]:
         """All instance ids, ascending: (k,) uint64."""
@@ -202,13 +237,26 @@ class GlobalMap:
         ring the last entry is True). k = 0 gives empty arrays of these shapes.
         """
 
-    def save(self, path: PathArg) -> None:
-        """Writes the native map file atomically (temp file + rename); OSError on I/O failure."""
+    def save(self, path: PathArg, compact: bool = False) -> None:
+        """Writes the native map file (format 2) atomically (temp file + rename); OSError on I/O
+        failure. ``compact=False`` stores coordinates bit for bit; ``compact=True`` rounds them to
+        a 0.1 mm grid (a loaded coordinate is at most 0.05 mm off) and delta-codes them: about a
+        fifth of the size for densely sampled polylines. Provenance is kept either way."""
 
     @staticmethod
-    def load(path: PathArg) -> GlobalMap:
-        """Reads a map file; ValueError naming the file if it is not a valid map file (wrong
-        magic, truncated, corrupt), OSError (FileNotFoundError) if it cannot be read."""
+    def load(path: PathArg, bbox: tuple[float, float, float, float] | None = None) -> GlobalMap:
+        """Reads a map file (format 1 or 2); ValueError naming the file if it is not a valid map
+        file (wrong magic, truncated, corrupt), OSError (FileNotFoundError) if it cannot be read.
+        With ``bbox = (xmin, ymin, xmax, ymax)``: only the instances whose bounding box meets it
+        (a format-2 file's index says which blocks to read; the rest of the file is not read, a
+        format-1 file is read whole); ValueError for NaN or min > max."""
+
+    def to_bytes(self, compact: bool = False) -> bytes:
+        """The native map file's contents in memory (``save``'s bytes)."""
+
+    @staticmethod
+    def from_bytes(data: bytes | bytearray) -> GlobalMap:
+        """A map from map file contents (format 1 or 2); ValueError if they are not valid."""
 
     def to_geojson(self, path: PathArg) -> None:
         """Writes the map as a GeoJSON FeatureCollection (atomically)."""

@@ -203,6 +203,9 @@ pub struct GlobalMap {
     /// The next automatic id; every id in the map is below it.
     next_id: u64,
     index: SpatialIndex,
+    /// Provenance: the sorted, distinct drives that observed each instance (absent: none); see
+    /// `provenance.rs`.
+    pub(crate) drives: HashMap<u64, Box<[u32]>>,
 }
 
 fn points_aabb(points: &[Point]) -> Aabb {
@@ -237,6 +240,7 @@ impl GlobalMap {
             free: Vec::new(),
             next_id: 0,
             index: SpatialIndex::new(),
+            drives: HashMap::new(),
         })
     }
 
@@ -251,6 +255,7 @@ impl GlobalMap {
             });
         }
         map.slots.reserve(instances.len());
+        map.id_to_slot.reserve(instances.len());
         for inst in instances {
             inst.validate()?;
             if inst.id >= next_id {
@@ -272,6 +277,50 @@ impl GlobalMap {
                 .enumerate()
                 .filter_map(|(s, i)| i.as_ref().map(|i| (s as u32, i.aabb()))),
         );
+        Ok(map)
+    }
+
+    /// [`Self::from_parts`] for `n` instances the caller has validated (`Instance::validate`),
+    /// each with its bounding box (crate use: loading, which does both in parallel); ids are
+    /// still checked here (unique, below `next_id`).
+    pub(crate) fn from_checked_parts(
+        config: MapConfig,
+        next_id: u64,
+        n: usize,
+        items: impl IntoIterator<Item = (Instance, Aabb)>,
+    ) -> Result<Self> {
+        let mut map = GlobalMap::new(config)?;
+        if n > u32::MAX as usize {
+            return Err(GeomError::InvalidParameter {
+                name: "instances",
+                reason: "more than 2^32 - 1 instances".into(),
+            });
+        }
+        map.slots.reserve(n);
+        map.id_to_slot.reserve(n);
+        let mut boxes = Vec::with_capacity(n);
+        for (inst, aabb) in items {
+            if inst.id >= next_id {
+                return Err(GeomError::InvalidParameter {
+                    name: "next_id",
+                    reason: format!("instance id {} is not below next_id {next_id}", inst.id),
+                });
+            }
+            let slot = map.slots.len() as u32;
+            if slot == u32::MAX {
+                return Err(GeomError::InvalidParameter {
+                    name: "instances",
+                    reason: "more than 2^32 - 1 instances".into(),
+                });
+            }
+            if map.id_to_slot.insert(inst.id, slot).is_some() {
+                return Err(GeomError::DuplicateId(inst.id));
+            }
+            map.slots.push(Some(inst));
+            boxes.push((slot, aabb));
+        }
+        map.next_id = next_id;
+        map.index = SpatialIndex::from_boxes(boxes);
         Ok(map)
     }
 
@@ -319,7 +368,7 @@ impl GlobalMap {
         }
     }
 
-    fn alloc_slot(&mut self, inst: Instance) -> Result<u32> {
+    pub(crate) fn alloc_slot(&mut self, inst: Instance) -> Result<u32> {
         let slot = match self.free.pop() {
             Some(s) => s,
             None => {
@@ -528,6 +577,38 @@ impl GlobalMap {
         Ok(())
     }
 
+    /// Replaces instance `inst.id` whole (geometry and bookkeeping, taken as they are: not
+    /// resampled) and updates the index; its provenance is kept. Errors on an unknown id or an
+    /// invalid instance (the map is then unchanged). For whole-map operations (`merge_map`).
+    pub(crate) fn put(&mut self, inst: Instance) -> Result<()> {
+        let slot = *self
+            .id_to_slot
+            .get(&inst.id)
+            .ok_or(GeomError::UnknownId(inst.id))?;
+        inst.validate()?;
+        let aabb = inst.aabb();
+        self.slots[slot as usize] = Some(inst);
+        self.index.upsert(slot, aabb);
+        Ok(())
+    }
+
+    /// Inserts `inst` (points and bookkeeping taken as they are) under the next automatic id,
+    /// which it returns; `inst.id` is ignored. For whole-map operations (`merge_map`).
+    pub(crate) fn insert_instance(&mut self, mut inst: Instance) -> Result<u64> {
+        let id = self.next_id;
+        if id == u64::MAX {
+            return Err(GeomError::InvalidParameter {
+                name: "id",
+                reason: "the map has used every id (2^64 - 1)".into(),
+            });
+        }
+        inst.id = id;
+        inst.validate()?;
+        self.alloc_slot(inst)?;
+        self.next_id = id + 1;
+        Ok(id)
+    }
+
     /// Removes and returns instance `id`.
     pub fn remove(&mut self, id: u64) -> Result<Instance> {
         let slot = self
@@ -539,6 +620,7 @@ impl GlobalMap {
             .ok_or(GeomError::UnknownId(id))?;
         self.index.remove(slot);
         self.free.push(slot);
+        self.drives.remove(&id);
         Ok(inst)
     }
 
@@ -548,6 +630,7 @@ impl GlobalMap {
         self.id_to_slot.clear();
         self.free.clear();
         self.index.clear();
+        self.drives.clear();
     }
 
     pub fn get(&self, id: u64) -> Option<&Instance> {
@@ -728,6 +811,14 @@ impl GlobalMap {
         }
         if self.free.len() + live != self.slots.len() {
             return Err("free list size mismatch".into());
+        }
+        for (id, drives) in &self.drives {
+            if !self.id_to_slot.contains_key(id) {
+                return Err(format!("provenance of the absent instance {id}"));
+            }
+            if drives.is_empty() || drives.windows(2).any(|w| w[0] >= w[1]) {
+                return Err(format!("drives of instance {id} not sorted and distinct"));
+            }
         }
         Ok(())
     }

@@ -160,6 +160,11 @@ pub fn extents_arg(obj: &Bound<'_, PyAny>) -> PyResult<[f64; 2]> {
     floats_arg::<2>(obj, "half_extents", "(hx, hy)")
 }
 
+/// A region `(xmin, ymin, xmax, ymax)` (NaN and order checked by the core).
+pub fn bbox_arg(obj: &Bound<'_, PyAny>) -> PyResult<[f64; 4]> {
+    floats_arg::<4>(obj, "bbox", "(xmin, ymin, xmax, ymax)")
+}
+
 /// Points as an `(n, 2)` float64 array.
 pub fn points_to_py<'py>(py: Python<'py>, pts: &[Point]) -> Bound<'py, PyArray2<f64>> {
     let mut arr = Array2::<f64>::zeros((pts.len(), 2));

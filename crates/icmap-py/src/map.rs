@@ -12,10 +12,14 @@ use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyInt};
 
 use crate::convert::{
-    extents_arg, frame_arg, int_arg, matrix_to_py, n_points_arg, points3_f32_to_py, points_arg,
-    points_to_py, pose_arg, vec_to_py,
+    bbox_arg, extents_arg, frame_arg, int_arg, matrix_to_py, n_points_arg, points3_f32_to_py,
+    points_arg, points_to_py, pose_arg, vec_to_py,
 };
 use crate::errors::IntoPyResult;
+use geom::merge_map::MergeMapParams;
+use geom::persist_v2::Encoding;
+use pyo3::pybacked::PyBackedBytes;
+use pyo3::types::PyBytes;
 
 /// The global vector map (world frame): instances with bookkeeping and a spatial index.
 #[pyclass(frozen, module = "icmapper._icmap", name = "GlobalMap")]
@@ -47,6 +51,33 @@ fn id_arg(obj: &Bound<'_, PyAny>) -> PyResult<u64> {
 /// A class argument: an int naming one of the classes (`ValueError` for another int).
 fn class_arg(obj: &Bound<'_, PyAny>) -> PyResult<MapClass> {
     MapClass::try_from(int_arg(obj, "cls")?).py_err()
+}
+
+/// A drive id: an int in 0..=2**32 - 1.
+fn drive_arg(obj: &Bound<'_, PyAny>) -> PyResult<u32> {
+    if obj.is_instance_of::<pyo3::types::PyBool>() {
+        return Err(PyTypeError::new_err("drive must be an int, got bool"));
+    }
+    if let Ok(d) = obj.extract::<u32>() {
+        return Ok(d);
+    }
+    if obj.extract::<i128>().is_ok() {
+        return Err(PyValueError::new_err(format!(
+            "drive must be in 0..=2**32 - 1, got {obj}"
+        )));
+    }
+    Err(PyTypeError::new_err(format!(
+        "drive must be an int, got {}",
+        obj.get_type().name()?
+    )))
+}
+
+fn encoding_arg(compact: bool) -> Encoding {
+    if compact {
+        Encoding::Compact
+    } else {
+        Encoding::Exact
+    }
 }
 
 impl PyGlobalMap {
@@ -259,7 +290,7 @@ impl PyGlobalMap {
     }
 
     /// Bookkeeping of instance `id`: dict(id, cls, closed, first_frame, last_frame, observations,
-    /// n_points).
+    /// n_points, drives).
     fn info<'py>(&self, py: Python<'py>, id: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyDict>> {
         let id = id_arg(id)?;
         let inst = py.detach(|| {
@@ -273,6 +304,7 @@ impl PyGlobalMap {
                 inst.last_frame,
                 inst.observations,
                 inst.points.len(),
+                m.drives(id).to_vec(),
             ))
         })?;
         let d = PyDict::new(py);
@@ -283,7 +315,86 @@ impl PyGlobalMap {
         d.set_item("last_frame", inst.4)?;
         d.set_item("observations", inst.5)?;
         d.set_item("n_points", inst.6)?;
+        d.set_item("drives", inst.7)?;
         Ok(d)
+    }
+
+    /// Records that drive `drive` (an int in 0..=2**32 - 1) observed every instance now in the map.
+    #[pyo3(signature = (drive, ids = None))]
+    fn tag_drive(
+        &self,
+        py: Python<'_>,
+        drive: &Bound<'_, PyAny>,
+        ids: Option<Vec<u64>>,
+    ) -> PyResult<()> {
+        let drive = drive_arg(drive)?;
+        py.detach(|| {
+            let mut map = self.write()?;
+            match ids {
+                None => {
+                    map.tag_drive(drive);
+                    Ok(())
+                }
+                Some(ids) => map.tag_drive_of(drive, &ids).py_err(),
+            }
+        })
+    }
+
+    /// Merges every instance of `other` into this map (see `icmap_geom::merge_map`): returns
+    /// dict(merged, inserted, absorbed). `other` is unchanged; the GIL is released.
+    #[pyo3(signature = (other, gate = 1.5, min_overlap = 0.5))]
+    fn merge_map<'py>(
+        &self,
+        py: Python<'py>,
+        other: &Bound<'py, PyGlobalMap>,
+        gate: f64,
+        min_overlap: f64,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let params = MergeMapParams { gate, min_overlap };
+        let other: &PyGlobalMap = other.get();
+        let stats = py.detach(|| {
+            if std::ptr::eq(self, other) {
+                let snapshot = self.read()?.clone();
+                return self.write()?.merge_map(&snapshot, params).py_err();
+            }
+            // The two locks are always taken in address order, so that `a.merge_map(b)` and
+            // `b.merge_map(a)` in two threads cannot deadlock.
+            if (self as *const Self) < (other as *const Self) {
+                let mut mine = self.write()?;
+                let theirs = other.read()?;
+                mine.merge_map(&theirs, params).py_err()
+            } else {
+                let theirs = other.read()?;
+                let mut mine = self.write()?;
+                mine.merge_map(&theirs, params).py_err()
+            }
+        })?;
+        let d = PyDict::new(py);
+        d.set_item("merged", stats.merged)?;
+        d.set_item("inserted", stats.inserted)?;
+        d.set_item("absorbed", stats.absorbed)?;
+        Ok(d)
+    }
+
+    /// The native map file's contents (format 2; `compact`: coordinates on a 0.1 mm grid).
+    #[pyo3(signature = (compact = false))]
+    fn to_bytes<'py>(&self, py: Python<'py>, compact: bool) -> PyResult<Bound<'py, PyBytes>> {
+        let bytes = py.detach(|| {
+            Ok::<_, PyErr>(geom::persist_v2::to_bytes(
+                &*self.read()?,
+                encoding_arg(compact),
+            ))
+        })?;
+        Ok(PyBytes::new(py, &bytes))
+    }
+
+    /// A map from the contents of a map file (bytes-like; format 1 or 2).
+    #[staticmethod]
+    fn from_bytes(py: Python<'_>, data: PyBackedBytes) -> PyResult<Self> {
+        let map = py.detach(|| geom::persist_v2::from_bytes(&data)).py_err()?;
+        Ok(PyGlobalMap {
+            inner: RwLock::new(map),
+        })
     }
 
     /// All ids, ascending, `(k,)` uint64.
@@ -336,16 +447,26 @@ impl PyGlobalMap {
         Ok((vec_to_py(py, s.ids), vec_to_py(py, cls), pts, mask))
     }
 
-    /// Writes the map file atomically (`str` or `os.PathLike`).
-    fn save(&self, py: Python<'_>, path: PathBuf) -> PyResult<()> {
-        py.detach(|| geom::persist::save(&*self.read()?, &path).py_err())
+    /// Writes the map file atomically (`str` or `os.PathLike`; format 2, `compact`: coordinates
+    /// on a 0.1 mm grid).
+    #[pyo3(signature = (path, compact = false))]
+    fn save(&self, py: Python<'_>, path: PathBuf, compact: bool) -> PyResult<()> {
+        py.detach(|| geom::persist_v2::save(&*self.read()?, &path, encoding_arg(compact)).py_err())
     }
 
-    /// Reads a map file (ValueError naming the file if it is not a valid map file, OSError if it
-    /// cannot be read).
+    /// Reads a map file, format 1 or 2 (ValueError naming the file if it is not a valid map
+    /// file, OSError if it cannot be read); with `bbox = (xmin, ymin, xmax, ymax)` only the
+    /// instances whose bounding box meets it (a format-2 file is not read whole).
     #[staticmethod]
-    fn load(py: Python<'_>, path: PathBuf) -> PyResult<Self> {
-        let map = py.detach(|| geom::persist::load(&path)).py_err()?;
+    #[pyo3(signature = (path, bbox = None))]
+    fn load(py: Python<'_>, path: PathBuf, bbox: Option<&Bound<'_, PyAny>>) -> PyResult<Self> {
+        let region = bbox.map(bbox_arg).transpose()?;
+        let map = py
+            .detach(|| match region {
+                None => geom::persist_v2::load(&path),
+                Some(r) => geom::persist_v2::load_region(&path, r),
+            })
+            .py_err()?;
         Ok(PyGlobalMap {
             inner: RwLock::new(map),
         })

@@ -63,8 +63,10 @@ def run_on_ray(
             ray.init(num_cpus=workers, **kwargs)
     try:
         actor = ray.remote(num_cpus=1, max_restarts=1, max_task_retries=1)(_DriveActor)
-        pool = ActorPool([actor.remote(settings) for _ in range(min(workers, len(tasks)) or 1)])
-        outcomes = list(pool.map(lambda a, t: a.map_drive.remote(t), tasks))
+        actors = [actor.remote(settings) for _ in range(min(workers, len(tasks)) or 1)]
+        outcomes = list(ActorPool(actors).map(lambda a, t: a.map_drive.remote(t), tasks))
+        for a in actors:  # an actor holds its CPU while alive: free them for the merges
+            ray.kill(a)
         merge = ray.remote(num_cpus=1, max_retries=1)(merge_bytes)
         ok = sorted((o for o in outcomes if o.status == "ok"), key=lambda o: o.index)
         refs = [ray.put(o.map_bytes) for o in ok]

@@ -37,19 +37,21 @@ from icmapper.city.reduce import merge_bytes, tree_reduce
 def _drive_tasks(
     city: Path, specs: Sequence[str], manifest: CityManifest, settings: CitySettings
 ) -> list[DriveTask]:
-    """One task per sequence of ``specs`` not yet in the manifest, with fresh drive ids."""
+    """One task per sequence of ``specs`` not yet in the manifest (by sequence name: a drive is
+    the same drive whichever spec names it, e.g. sim-city:val:0:2 and sim-city:val:0:3 share two),
+    with fresh drive ids."""
     from icmapper.data.sources import open_source
 
-    done = {(d.spec, d.sequence) for d in manifest.drives}
+    done = {d.sequence for d in manifest.drives}
     index = manifest.next_index()
     tasks = []
     for spec in specs:
         for seq in open_source(
             spec, image_size=settings.image_size, seed=settings.seed, render=False
         ):
-            if (spec, seq.name) in done:
+            if seq.name in done:
                 continue
-            done.add((spec, seq.name))
+            done.add(seq.name)
             run = city / "drives" / f"{index:04d}-{seq.name}"
             tasks.append(DriveTask(index, spec, seq.name, str(run)))
             index += 1
