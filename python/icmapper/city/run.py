@@ -192,7 +192,8 @@ def _write_outputs(
         write_geojson_wgs84(gmap, geo, city / "city.wgs84.geojson")
     if pictures:
         rng = PerceptionRange.from_name(manifest.range_name)
-        poses = np.concatenate([np.asarray(s.poses) for s in seqs])  # (sum T, 4, 4)
+        gap = np.full((1, 4, 4), np.nan)  # breaks the drawn path between drives
+        poses = np.concatenate([p for s in seqs for p in (np.asarray(s.poses), gap)])
         plot_global_maps(
             gmap,
             gt_mod.city_gt(seqs, rng),

@@ -22,7 +22,8 @@ def plot_global_maps(
 ) -> None:
     """Writes a PNG: ground-truth global map (left) and predicted global map (right).
 
-    pred: a GlobalMap; gt: MapInstance list (world frame); poses (T, 4, 4) ego->world.
+    pred: a GlobalMap; gt: MapInstance list (world frame); poses (T, 4, 4) ego->world (a pose of
+    NaNs breaks the drawn path, e.g. between the drives of a city).
     """
     import matplotlib
 
@@ -37,7 +38,7 @@ def plot_global_maps(
     gt_items = [(int(g.cls), np.asarray(g.points), bool(g.closed)) for g in gt]
     allpts = [traj] + [p for _, p, _ in pred_items + gt_items]
     xy = np.concatenate(allpts)
-    lo, hi = xy.min(0) - 10, xy.max(0) + 10
+    lo, hi = np.nanmin(xy, 0) - 10, np.nanmax(xy, 0) + 10  # NaN poses break the path
     fig, axes = plt.subplots(1, 2, figsize=(12, 6.5), sharex=True, sharey=True)
     for ax, items, name in (
         (axes[0], gt_items, "ground truth"),
