@@ -5,6 +5,11 @@
 //! `cargo run --release -p icmap-geom --example city_store -- [--sizes 10000,100000]
 //! [--merge-sizes 10000,100000] [--dir DIR]`
 //!
+//! Save and load: three rounds per format (save, then load; the loaded copy dropped), the median
+//! round printed with the fastest beside it, and the process's user and kernel CPU seconds of the
+//! median round (the kernel share is mostly first-touch page faults of fresh memory, which vary
+//! from run to run on a shared VM).
+//!
 //! The synthetic city: instances on a grid of 25 m cells, 90 % smooth polylines of 20-60 m
 //! (dividers and boundaries, heading changing smoothly, stored at 1 m spacing: about 41 points
 //! each), 10 % crossings (rectangles of 3-6 x 6-12 m, about 24 points). The second map of a merge
@@ -38,6 +43,11 @@ impl Rng {
 }
 
 const CELL: f64 = 25.0;
+/// Save + load rounds per format.
+const REPS: usize = 3;
+
+/// One round: save and load wall seconds, and their (user, kernel) CPU seconds.
+type Round = (f64, f64, (f64, f64), (f64, f64));
 
 /// One synthetic instance in the cell at `(cx, cy)`: class and geometry (before resampling).
 fn instance(rng: &mut Rng, cx: f64, cy: f64) -> (MapClass, Vec<Point>) {
@@ -164,41 +174,44 @@ fn store(n: usize, dir: &Path) -> Result<(), String> {
     );
     let path = dir.join(format!("city-{n}.icmap"));
     let err = |e: icmap_geom::GeomError| e.to_string();
-    // Format 1 (today's file).
-    let t = Instant::now();
-    persist::save(&map, &path).map_err(err)?;
-    let v1_save = secs(t);
-    let v1_size = file_len(&path);
-    let t = Instant::now();
-    let back = persist::load(&path).map_err(err)?;
-    let v1_load = secs(t);
-    assert_eq!(back.len(), n);
-    drop(back);
-    println!(
-        "format 1          {:>8.1} MB  {:>6.0} B/instance  save {v1_save:.2} s  load {v1_load:.2} s  save+load {:.2} s",
-        v1_size as f64 / 1e6,
-        v1_size as f64 / n as f64,
-        v1_save + v1_load
-    );
-    for encoding in [Encoding::Exact, Encoding::Compact] {
-        let (r, save, save_cpu) = timed(|| persist_v2::save(&map, &path, encoding));
-        r.map_err(err)?;
+    // Per format: REPS rounds of save, then load (the loaded copy dropped before the next round);
+    // the median round by save + load is printed, with the fastest beside it.
+    let mut v1_size = 0u64;
+    for format in ["format 1", "format 2 exact", "format 2 compact"] {
+        let mut rounds: Vec<Round> = Vec::new();
+        for _ in 0..REPS {
+            let (r, save, save_cpu) = timed(|| match format {
+                "format 1" => persist::save(&map, &path),
+                "format 2 exact" => persist_v2::save(&map, &path, Encoding::Exact),
+                _ => persist_v2::save(&map, &path, Encoding::Compact),
+            });
+            r.map_err(err)?;
+            let (back, load, load_cpu) = timed(|| match format {
+                "format 1" => persist::load(&path),
+                _ => persist_v2::load(&path),
+            });
+            let back = back.map_err(err)?;
+            assert_eq!(back.len(), n);
+            drop(back);
+            rounds.push((save, load, save_cpu, load_cpu));
+        }
+        rounds.sort_by(|a, b| (a.0 + a.1).total_cmp(&(b.0 + b.1)));
+        let (save, load, save_cpu, load_cpu) = rounds[rounds.len() / 2];
+        let best = rounds[0].0 + rounds[0].1;
         let size = file_len(&path);
-        let (back, load, load_cpu) = timed(|| persist_v2::load(&path));
-        let back = back.map_err(err)?;
-        assert_eq!(back.len(), n);
-        drop(back);
+        if format == "format 1" {
+            v1_size = size;
+        }
         println!(
-            "format 2 {:<8} {:>8.1} MB  {:>6.0} B/instance  save {save:.2} s  load {load:.2} s  save+load {:.2} s  size {:.3} of format 1",
-            format!("{encoding:?}").to_lowercase(),
+            "{format:<17} {:>8.1} MB  {:>4.0} B/instance ({:.3} of format 1)  save {save:.2} s  load {load:.2} s  save+load {:.2} s (fastest of {REPS}: {best:.2} s)",
             size as f64 / 1e6,
             size as f64 / n as f64,
+            size as f64 / v1_size as f64,
             save + load,
-            size as f64 / v1_size as f64
         );
         println!(
-            "                  CPU (user + kernel) s: save {:.2} + {:.2}, load {:.2} + {:.2}",
-            save_cpu.0, save_cpu.1, load_cpu.0, load_cpu.1
+            "{:17} CPU (user + kernel) s: save {:.2} + {:.2}, load {:.2} + {:.2}",
+            "", save_cpu.0, save_cpu.1, load_cpu.0, load_cpu.1
         );
     }
     // Region loading from the compact file: a 500 x 500 m square in the middle of the city.

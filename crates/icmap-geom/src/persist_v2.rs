@@ -261,10 +261,10 @@ pub fn to_bytes(map: &GlobalMap, encoding: Encoding) -> Vec<u8> {
     // Each instance's drives: a merge join of (id, position) and the provenance table, both
     // sorted by id (no hash lookups, no visits to the instances' points).
     let mut by_id: Vec<(u64, usize)> = insts.iter().enumerate().map(|(k, i)| (i.id, k)).collect();
-    by_id.sort_unstable();
+    by_id.par_sort_unstable();
     let mut drive_lists: Vec<(u64, &[u32])> =
         map.drives.iter().map(|(&id, d)| (id, &d[..])).collect();
-    drive_lists.sort_unstable_by_key(|x| x.0);
+    drive_lists.par_sort_unstable_by_key(|x| x.0);
     let mut drives_of: Vec<&[u32]> = vec![&[]; insts.len()];
     let mut lists = drive_lists.iter().peekable();
     for &(id, k) in &by_id {
@@ -285,12 +285,12 @@ pub fn to_bytes(map: &GlobalMap, encoding: Encoding) -> Vec<u8> {
         })
         .unwrap_or_else(|| Aabb::new(Point::origin(), Point::origin()));
     let mut keyed: Vec<(u64, u64, usize)> = anchors
-        .iter()
+        .par_iter()
         .zip(&insts)
         .enumerate()
         .map(|(k, (q, i))| (hilbert_key(q, &extent), i.id, k))
         .collect();
-    keyed.sort_unstable();
+    keyed.par_sort_unstable();
     let order: Vec<(&Instance, &[u32])> = keyed
         .iter()
         .map(|&(_, _, k)| (insts[k], drives_of[k]))
@@ -585,7 +585,8 @@ fn parse_head(bytes: &[u8]) -> Parse<Head> {
 
 /// An instance as decoded, with its drives (and, once checked, its bounding box).
 type Decoded = (Instance, Vec<u32>);
-type Checked = (Instance, Vec<u32>, Aabb);
+/// A decoded block after the checks: the instances with their boxes, and the drive lists.
+type Checked = (Vec<(Instance, Aabb)>, Vec<(u64, Box<[u32]>)>);
 
 fn decode_instance(c: &mut Cursor<'_>, quantum: f64) -> Parse<Decoded> {
     let id = c.varint("instance id")?;
@@ -670,7 +671,7 @@ fn decode_block(
     bytes: &[u8],
     quantum: f64,
     region: Option<&Aabb>,
-) -> Parse<Vec<Checked>> {
+) -> Parse<Checked> {
     let computed = hash64(bytes);
     if computed != e.sum {
         return Err(format!(
@@ -680,6 +681,7 @@ fn decode_block(
     }
     let mut c = Cursor { bytes, pos: 0 };
     let mut out = Vec::with_capacity((e.count as usize).min(bytes.len()));
+    let mut drive_lists = Vec::new();
     let bbox = Aabb::new(
         Point::new(e.bbox[0], e.bbox[1]),
         Point::new(e.bbox[2], e.bbox[3]),
@@ -696,7 +698,10 @@ fn decode_block(
             ));
         }
         if region.is_none_or(|r| r.intersects(&b)) {
-            out.push((inst, drives, b));
+            if !drives.is_empty() {
+                drive_lists.push((inst.id, drives.into_boxed_slice()));
+            }
+            out.push((inst, b));
         }
     }
     if c.remaining() != 0 {
@@ -706,27 +711,36 @@ fn decode_block(
             e.count
         ));
     }
-    Ok(out)
+    Ok((out, drive_lists))
 }
 
 /// Builds the map from decoded instances (the store's checks: invariants, unique ids, ids below
 /// next_id).
-fn assemble(head: &Head, blocks: Vec<Vec<Checked>>) -> Parse<GlobalMap> {
+fn assemble(head: &Head, blocks: Vec<Checked>) -> Parse<GlobalMap> {
     head.config
         .validate()
         .map_err(|e| format!("bad config: {e}"))?;
-    let n = blocks.iter().map(Vec::len).sum();
-    let mut drive_lists = Vec::with_capacity(n);
-    let items = blocks.into_iter().flatten().map(|(inst, drives, b)| {
-        if !drives.is_empty() {
-            drive_lists.push((inst.id, drives.into_boxed_slice()));
-        }
-        (inst, b)
-    });
-    let mut map = GlobalMap::from_checked_parts(head.config, head.next_id, n, items)
-        .map_err(|e| e.to_string())?;
-    map.drives.reserve(drive_lists.len());
-    map.drives.extend(drive_lists);
+    let (instances, drive_lists): (Vec<_>, Vec<_>) = blocks.into_iter().unzip();
+    let n = instances.iter().map(Vec::len).sum();
+    // The store and the provenance table are built at the same time.
+    let (map, drives) = rayon::join(
+        || {
+            GlobalMap::from_checked_parts(
+                head.config,
+                head.next_id,
+                n,
+                instances.into_iter().flatten(),
+            )
+        },
+        || {
+            let mut table =
+                std::collections::HashMap::with_capacity(drive_lists.iter().map(Vec::len).sum());
+            table.extend(drive_lists.into_iter().flatten());
+            table
+        },
+    );
+    let mut map = map.map_err(|e| e.to_string())?;
+    map.drives = drives;
     Ok(map)
 }
 
@@ -773,7 +787,7 @@ fn with_path(e: GeomError, path: &str) -> GeomError {
 /// assembled once the file's bytes are dropped).
 enum Parsed {
     Map(Box<GlobalMap>),
-    Blocks(Head, Vec<Vec<Checked>>),
+    Blocks(Head, Vec<Checked>),
 }
 
 fn decode_any(bytes: &[u8], path: &str, region: Option<&Aabb>) -> Result<Parsed> {
@@ -789,7 +803,7 @@ fn decode_any(bytes: &[u8], path: &str, region: Option<&Aabb>) -> Result<Parsed>
         FORMAT_VERSION_2 => {
             let head = parse_head(bytes).map_err(&fmt)?;
             let start = head.len() as usize;
-            let decoded: Parse<Vec<Vec<Checked>>> = head
+            let decoded: Parse<Vec<Checked>> = head
                 .blocks
                 .par_iter()
                 .enumerate()
@@ -902,7 +916,7 @@ fn load_file(path: &Path, region: Option<Aabb>) -> Result<GlobalMap> {
     drop(head_bytes);
     let start = head.len();
     let f = &f;
-    let results: Vec<Result<Vec<Checked>>> = head
+    let results: Vec<Result<Checked>> = head
         .blocks
         .par_iter()
         .enumerate()

@@ -297,7 +297,6 @@ impl GlobalMap {
             });
         }
         map.slots.reserve(n);
-        map.id_to_slot.reserve(n);
         let mut boxes = Vec::with_capacity(n);
         for (inst, aabb) in items {
             if inst.id >= next_id {
@@ -313,14 +312,27 @@ impl GlobalMap {
                     reason: "more than 2^32 - 1 instances".into(),
                 });
             }
-            if map.id_to_slot.insert(inst.id, slot).is_some() {
-                return Err(GeomError::DuplicateId(inst.id));
-            }
             map.slots.push(Some(inst));
             boxes.push((slot, aabb));
         }
+        // The id map and the spatial index are built at the same time.
+        let slots = &map.slots;
+        let (index, ids) = rayon::join(
+            || SpatialIndex::from_boxes(boxes),
+            || {
+                let mut ids: HashMap<u64, u32> = HashMap::with_capacity(slots.len());
+                for (slot, inst) in slots.iter().enumerate() {
+                    let id = inst.as_ref().map_or(u64::MAX, |i| i.id);
+                    if ids.insert(id, slot as u32).is_some() {
+                        return Err(GeomError::DuplicateId(id));
+                    }
+                }
+                Ok(ids)
+            },
+        );
+        map.id_to_slot = ids?;
+        map.index = index;
         map.next_id = next_id;
-        map.index = SpatialIndex::from_boxes(boxes);
         Ok(map)
     }
 
