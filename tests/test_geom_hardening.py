@@ -191,3 +191,133 @@ def test_integer_arguments_accept_numpy_ints_and_refuse_floats() -> None:
         m.insert(1, LINE, frame=1.5)
     with pytest.raises(TypeError, match="n"):
         geom.resample(LINE, 5.0)
+
+
+# ---------------------------------------------------------------------------------------------
+# 3. the coordinate domain: |x|, |y| <= 1e7 m, finite (non-finite results from finite inputs)
+
+MAX_COORD = 1e7
+POSE = (1.0, 2.0, 0.3)
+RING = np.array([[0.0, 0.0], [10.0, 0.0], [10.0, 5.0], [0.0, 5.0]])  # (4, 2)
+
+
+def _map_with_line() -> GlobalMap:
+    m = GlobalMap()
+    m.insert(1, LINE)
+    m.insert(0, RING)
+    return m
+
+
+# Every engine function that takes points, with the rest of its arguments filled in.
+POINT_ENTRY_POINTS: dict[str, Any] = {
+    "resample": lambda p: geom.resample(p, 10),
+    "resample_closed": lambda p: geom.resample(p, 10, closed=True),
+    "resample_spacing": lambda p: geom.resample_spacing(p, 1.0),
+    "clip_to_patch": lambda p: geom.clip_to_patch(p, POSE, (5, 5)),
+    "clip_to_patch_closed": lambda p: geom.clip_to_patch(p, POSE, (5, 5), closed=True),
+    "fit_curve": lambda p: geom.fit_curve(p),
+    "merge_polyline_global": lambda p: geom.merge_polyline(p, LINE),
+    "merge_polyline_detected": lambda p: geom.merge_polyline(LINE, p),
+    "polygon_union_one": lambda p: geom.polygon_union([p]),
+    "polygon_union_two": lambda p: geom.polygon_union([RING, p]),
+    "polygon_union_three": lambda p: geom.polygon_union([RING, p, RING + 1.0]),
+    "chamfer_distance": lambda p: geom.chamfer_distance(LINE, p),
+    "chamfer_matrix": lambda p: geom.chamfer_matrix([LINE], [p]),
+    "insert_divider": lambda p: _map_with_line().insert(1, p),
+    "insert_crossing": lambda p: _map_with_line().insert(0, p),
+    "insert_with_id": lambda p: _map_with_line().insert_with_id(9, 2, p),
+    "merge_divider": lambda p: _map_with_line().merge(0, p),
+    "merge_crossing": lambda p: _map_with_line().merge(1, p),
+    "replace": lambda p: _map_with_line().replace(0, p),
+}
+
+
+@pytest.mark.timeout(30)
+@pytest.mark.parametrize("func", sorted(POINT_ENTRY_POINTS))
+@pytest.mark.parametrize(
+    "bad",
+    [1e200, -1.7e308, MAX_COORD * (1 + 1e-15), -2e7],
+    ids=["1e200", "-1.7e308", "edge+", "-2e7"],
+)
+def test_coordinates_outside_the_domain_raise(func: str, bad: float) -> None:
+    """A finite coordinate beyond 1e7 m raises ValueError naming the domain, wherever it is."""
+    pts = np.array([[0.0, 0.0], [3.0, 1.0], [6.0, 0.0], [3.0, 4.0]])  # (4, 2)
+    pts[2, 1] = bad
+    with pytest.raises(ValueError, match="domain"):
+        POINT_ENTRY_POINTS[func](pts)
+
+
+@pytest.mark.timeout(30)
+def test_the_issue_cases_raise() -> None:
+    """Issue 14.3: each of these returned inf, NaN or wrong geometry from finite inputs."""
+    with pytest.raises(ValueError, match="domain"):
+        geom.chamfer_distance([[0, 0]], [[1e200, 0]])
+    ring = np.array([[1.7e308, -1.7e308], [0.0, 0.0], [10.0, 5.0]])  # (3, 2)
+    with pytest.raises(ValueError, match="domain"):
+        geom.clip_to_patch(ring, POSE, (5, 5), closed=True)
+    with pytest.raises(ValueError, match="domain"):
+        geom.clip_to_patch(ring, POSE, (5, 5))
+    m = _map_with_line()
+    with pytest.raises(ValueError, match="domain"):
+        m.sample_patch((1e39, 0, 0), (1e40, 1e40), margin=0.0)
+    with pytest.raises(ValueError, match="domain"):
+        m.sample_patch((0, 0, 0), (1e40, 1e40))
+    with pytest.raises(ValueError, match="domain"):
+        m.sample_patch((0, 0, 0), (10, 10), margin=2e7)
+    with pytest.raises(ValueError, match="domain"):
+        m.query((1e39, 0, 0), (10, 10))
+    with pytest.raises(ValueError, match="domain"):
+        geom.clip_to_patch(LINE, (0, -3e7, 0), (10, 10))
+
+
+@pytest.mark.timeout(60)
+def test_results_at_the_edges_of_the_domain_are_finite() -> None:
+    """Geometry spanning the whole domain, and tiny or subnormal geometry: every result is
+    finite (float32 ego-frame samples included)."""
+    big = np.array([[-MAX_COORD, -MAX_COORD], [MAX_COORD, -MAX_COORD], [MAX_COORD, MAX_COORD]])
+    for pts, spacing in ((big, 1e4), (big * 1e-300, 1.0), (LINE * 5e-324, 1.0), (LINE, 1.0)):
+        outs: list[np.ndarray] = []
+        for call in (
+            lambda p: geom.resample(p, 50),
+            lambda p: geom.resample(p, 50, closed=True),
+            lambda p, s=spacing: geom.resample_spacing(p, s),
+            lambda p, s=spacing: geom.fit_curve(p, 0.5, s),
+            lambda p, s=spacing: geom.merge_polyline(p, p[::-1] * 0.5, 0.5, s),
+        ):
+            try:
+                outs.append(call(pts))
+            except ValueError:  # degenerate (zero length after dedup) is a clean refusal
+                pass
+        outs += geom.clip_to_patch(pts, (0.0, 0.0, 0.1), (MAX_COORD, MAX_COORD), margin=MAX_COORD)
+        outs += geom.polygon_union([pts, pts * 0.5])
+        d = geom.chamfer_distance(pts, pts * 0.5)
+        assert np.isfinite(d)
+        assert all(np.isfinite(o).all() for o in outs)
+    m = GlobalMap(spacing=1e4)
+    m.insert(2, big)
+    m.insert(0, big)
+    _, _, pts32, _ = m.sample_patch((MAX_COORD, MAX_COORD, 0.7), (MAX_COORD, MAX_COORD), MAX_COORD)
+    assert len(pts32) == 2 and np.isfinite(pts32).all()
+    assert m.query((0.0, 0.0, 0.0), (MAX_COORD, MAX_COORD)).tolist() == [0, 1]
+
+
+def _fnv1a64(data: bytes) -> int:
+    h = 0xCBF29CE484222325
+    for b in data:
+        h = ((h ^ b) * 0x100000001B3) & 0xFFFFFFFFFFFFFFFF
+    return h
+
+
+def test_a_map_file_with_coordinates_outside_the_domain_is_refused(tmp_path: Path) -> None:
+    """A file holding a coordinate beyond 1e7 m (with a valid checksum) is not a valid map."""
+    m = GlobalMap()
+    m.insert(1, LINE)
+    path = tmp_path / "m.icmap"
+    m.save(path)
+    raw = bytearray(path.read_bytes())
+    body = raw[:-8]
+    first_x = 12 + 32 + 38  # magic + version, header, the first instance's fixed fields
+    body[first_x : first_x + 8] = np.float64(5e7).tobytes()
+    path.write_bytes(bytes(body) + _fnv1a64(bytes(body)).to_bytes(8, "little"))
+    with pytest.raises(ValueError, match="domain"):
+        GlobalMap.load(path)

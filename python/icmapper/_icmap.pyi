@@ -6,6 +6,11 @@ results are float64 unless stated. A ``pose`` is ``(x, y, yaw)`` ego -> world, `
 ``(hx, hy)`` along the ego x / y axes. Classes: 0 ped_crossing (closed ring, first point not
 repeated), 1 divider, 2 boundary (open polylines).
 
+Coordinate domain: every coordinate (points, the ``x``, ``y`` of a pose, stored map files) is
+finite with ``|x|, |y| <= 1e7`` m, and half extents and margins are at most 1e7 m; ``yaw`` is any
+finite angle. Anything outside raises ``ValueError`` (naming the value) at the call, instead of
+computing overflowed, infinite or NaN results; inside it every result is finite.
+
 Errors: ``ValueError`` for bad values (NaN/inf, too few points, degenerate geometry, bad
 parameters, unknown class, wrong shapes, duplicate id, corrupt map file), ``TypeError`` for wrong
 types/dtypes (complex, object, str), ``KeyError`` for an unknown instance id, ``OSError`` (with the
