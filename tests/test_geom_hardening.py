@@ -321,3 +321,115 @@ def test_a_map_file_with_coordinates_outside_the_domain_is_refused(tmp_path: Pat
     path.write_bytes(bytes(body) + _fnv1a64(bytes(body)).to_bytes(8, "little"))
     with pytest.raises(ValueError, match="domain"):
         GlobalMap.load(path)
+
+
+# ---------------------------------------------------------------------------------------------
+# 4. the stub's promises (python/icmapper/_icmap.pyi), each checked against the code
+
+
+def _seg_distance(p: np.ndarray, poly: np.ndarray) -> float:
+    """Distance from point p (2,) to the polyline poly (k, 2)."""
+    a, b = poly[:-1], poly[1:]  # (k-1, 2), (k-1, 2)
+    ab = b - a  # (k-1, 2)
+    t = np.clip(np.einsum("ij,ij->i", p - a, ab) / np.einsum("ij,ij->i", ab, ab), 0.0, 1.0)
+    return float(np.min(np.linalg.norm(a + ab * t[:, None] - p, axis=1)))
+
+
+@pytest.mark.timeout(30)
+def test_smoothing_zero_is_a_valid_setting() -> None:
+    """Issue 14.4: ``GlobalMap(smoothing=0)`` is accepted, as the code always did and the mapper's
+    config allows; the stub promised a ValueError. The stub now says what 0 means: the merged
+    curve interpolates every point (scipy's ``s=0``)."""
+    m = GlobalMap(smoothing=0.0)
+    assert m.smoothing == 0.0
+    i = m.insert(1, LINE)
+    m.merge(i, LINE + [0.0, 0.4])
+    assert np.isfinite(m.get(i)[1]).all()
+    pts = np.array([[0.0, 0.0], [3.0, 1.0], [6.0, -1.0], [9.0, 0.5], [12.0, 0.0]])  # (5, 2)
+    dense = geom.fit_curve(pts, s=0.0, spacing=0.01)  # (k, 2)
+    assert max(_seg_distance(q, dense) for q in pts) < 1e-4
+    smooth = geom.fit_curve(pts, s=0.5, spacing=0.01)  # (k, 2)
+    assert max(_seg_distance(q, smooth) for q in pts) > 1e-2
+
+
+@pytest.mark.parametrize(
+    "kwargs",
+    [
+        {"smoothing": -1.0},
+        {"smoothing": float("nan")},
+        {"smoothing": float("inf")},
+        {"spacing": 0.0},
+        {"spacing": -1.0},
+        {"spacing": float("nan")},
+        {"spacing": float("inf")},
+    ],
+)
+def test_global_map_settings_outside_their_range_raise(kwargs: dict[str, float]) -> None:
+    with pytest.raises(ValueError, match="smoothing|spacing"):
+        GlobalMap(**kwargs)
+
+
+def test_stub_promises_on_the_map() -> None:
+    """insert ids increase from 0 and are never reused; a failed merge leaves the instance
+    unchanged; replace keeps the first frame and counts the observation; the map refuses to be
+    pickled; ``in`` is False for anything that is not a stored id; an empty sample has the
+    documented shapes and dtypes."""
+    import pickle
+
+    m = GlobalMap()
+    assert [m.insert(1, LINE), m.insert(2, LINE)] == [0, 1]
+    m.remove(1)
+    assert m.insert(1, LINE) == 2
+    m.insert_with_id(10, 1, LINE)
+    assert m.insert(1, LINE) == 11
+    with pytest.raises(ValueError, match="already exists"):
+        m.insert_with_id(10, 1, LINE)
+    before = (m.get(0)[1].copy(), m.info(0))
+    for bad in ([[0.0, np.nan], [1.0, 1.0]], [[0.0, 0.0]], [[0.0, 0.0], [2e7, 0.0]]):
+        with pytest.raises(ValueError):
+            m.merge(0, bad, frame=5)
+    assert np.array_equal(m.get(0)[1], before[0]) and m.info(0) == before[1]
+    m.replace(0, LINE * 2.0, frame=7)
+    info = m.info(0)
+    assert (info["first_frame"], info["last_frame"], info["observations"]) == (0, 7, 2)
+    assert set(info) == {
+        "id",
+        "cls",
+        "closed",
+        "first_frame",
+        "last_frame",
+        "observations",
+        "n_points",
+    }
+    with pytest.raises(TypeError):
+        pickle.dumps(m)
+    assert not any(x in m for x in (5, -1, "0", None, 1.0, 2**64))
+    ids, cls, pts, mask = m.sample_patch((1e6, 1e6, 0.0), (1.0, 1.0), n_points=7)
+    assert [a.shape for a in (ids, cls, pts, mask)] == [(0,), (0,), (0, 7, 2), (0, 7)]
+    assert [a.dtype for a in (ids, cls, pts, mask)] == [np.uint64, np.int64, np.float32, np.bool_]
+    assert m.ids().dtype == np.uint64 and list(m.ids()) == sorted(m.ids())
+    for n_points in (1, 1_000_001):
+        with pytest.raises(ValueError, match="n_points"):
+            m.sample_patch((0.0, 0.0, 0.0), (30.0, 15.0), n_points=n_points)
+    m.insert(0, RING)
+    with pytest.raises(ValueError, match="n_points"):
+        m.sample_patch((0.0, 0.0, 0.0), (30.0, 15.0), n_points=2)
+
+
+def test_stub_promises_on_the_functions() -> None:
+    """resample_spacing's counts and cap, fit_curve's parameter ranges, polygon_union's
+    zero-area rule and order."""
+    line = np.array([[0.0, 0.0], [10.0, 0.0]])  # (2, 2)
+    assert len(geom.resample_spacing(line, 3.0)) == 5  # max(2, ceil(10 / 3) + 1)
+    assert len(geom.resample_spacing(line, 3.0, closed=True)) == 7  # max(3, ceil(20 / 3))
+    with pytest.raises(ValueError, match="spacing"):
+        geom.resample_spacing(np.array([[0.0, 0.0], [1e7, 0.0]]), 1e-3)
+    for s, spacing in ((-0.1, 1.0), (float("nan"), 1.0), (0.5, 0.0), (0.5, float("inf"))):
+        with pytest.raises(ValueError, match="`s`|spacing"):
+            geom.fit_curve(LINE, s=s, spacing=spacing)
+        with pytest.raises(ValueError, match="`s`|spacing"):
+            geom.merge_polyline(LINE, LINE, s=s, spacing=spacing)
+    flat = np.array([[0.0, 0.0], [1.0, 0.0], [2.0, 0.0]])  # (3, 2)
+    assert geom.polygon_union([flat]) == []
+    u = geom.polygon_union([flat, SQUARE, SQUARE * 0.5 + 5.0])
+    assert [round(ring_area(r), 9) for r in u] == [1.0, 0.25]
