@@ -433,3 +433,71 @@ def test_stub_promises_on_the_functions() -> None:
     assert geom.polygon_union([flat]) == []
     u = geom.polygon_union([flat, SQUARE, SQUARE * 0.5 + 5.0])
     assert [round(ring_area(r), 9) for r in u] == [1.0, 0.25]
+
+
+# ---------------------------------------------------------------------------------------------
+# 5. temp files left by writers killed mid-save
+
+
+def _temps(path: Path) -> list[Path]:
+    return sorted(path.parent.glob(f".{path.name}.tmp.*"))
+
+
+@pytest.mark.timeout(300)
+def test_writers_killed_mid_save_leave_nothing_behind_for_long(tmp_path: Path) -> None:
+    """Issue 14.5: SIGKILL during repeated saves of a ~20 MB map left ``.NAME.tmp.<pid>.<n>``
+    files that later saves never removed. Now: the map file is intact after every kill (old or
+    new map); the next save keeps the dead writers' files while they may still be being created
+    (younger than a minute), and removes them all once older; a live writer's file (locked) is
+    never removed."""
+    import fcntl
+    import random
+    import time
+
+    path = tmp_path / "big.icmap"
+    package_root = Path(icmapper.__file__).resolve().parents[1]
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.pathsep.join([str(package_root), env.get("PYTHONPATH", "")])
+    code = f"""
+        import numpy as np
+        from icmapper import GlobalMap
+        m = GlobalMap()
+        rng = np.random.default_rng(0)
+        for _ in range(200):
+            m.insert(1, np.cumsum(rng.normal(0.0, 1.0, (4000, 2)), axis=0))
+        m.save({str(path)!r})
+        print("ready", flush=True)
+        while True:
+            m.save({str(path)!r})
+    """
+    rnd = random.Random(0)
+    for _ in range(6):
+        proc = subprocess.Popen(
+            [sys.executable, "-c", textwrap.dedent(code)],
+            stdout=subprocess.PIPE,
+            text=True,
+            env=env,
+            preexec_fn=_limit_memory,
+        )
+        assert proc.stdout is not None and proc.stdout.readline().strip() == "ready"
+        time.sleep(rnd.uniform(0.05, 0.4))
+        proc.kill()
+        proc.wait()
+        assert len(GlobalMap.load(path)) == 200  # never a torn map file
+    left = _temps(path)
+    assert left, "no kill landed mid-save (unlikely): nothing to test"
+    m = GlobalMap.load(path)
+    m.save(path)
+    assert _temps(path) == left  # too young to tell from a writer that is creating its file
+    live = path.parent / f".{path.name}.tmp.777.0"
+    with live.open("wb") as f:
+        fcntl.flock(f, fcntl.LOCK_EX)
+        old = time.time() - 120.0
+        for p in [*left, live]:
+            os.utime(p, (old, old))
+        m.save(path)
+        assert _temps(path) == [live]  # the dead writers' files are gone, the live one kept
+    os.utime(live, (old, old))
+    m.save(path)
+    assert _temps(path) == []
+    assert len(GlobalMap.load(path)) == 200

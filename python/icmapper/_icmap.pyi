@@ -218,7 +218,11 @@ class GlobalMap:
         """
 
     def save(self, path: PathArg) -> None:
-        """Writes the native map file atomically (temp file + rename); OSError on I/O failure."""
+        """Writes the native map file atomically (temp file ``.NAME.tmp.<pid>.<n>`` + rename);
+        OSError on I/O failure. A writer killed mid-save leaves the map file intact (old or new)
+        and its temp file behind; every save removes such files of dead writers once unwritten
+        for a minute (each writer holds a lock on its temp file, so a live writer's is never
+        removed)."""
 
     @staticmethod
     def load(path: PathArg) -> GlobalMap:
