@@ -191,3 +191,399 @@ def test_integer_arguments_accept_numpy_ints_and_refuse_floats() -> None:
         m.insert(1, LINE, frame=1.5)
     with pytest.raises(TypeError, match="n"):
         geom.resample(LINE, 5.0)
+
+
+# ---------------------------------------------------------------------------------------------
+# 3. the coordinate domain: |x|, |y| <= 1e7 m, finite (non-finite results from finite inputs)
+
+MAX_COORD = 1e7
+POSE = (1.0, 2.0, 0.3)
+RING = np.array([[0.0, 0.0], [10.0, 0.0], [10.0, 5.0], [0.0, 5.0]])  # (4, 2)
+
+
+def _map_with_line() -> GlobalMap:
+    m = GlobalMap()
+    m.insert(1, LINE)
+    m.insert(0, RING)
+    return m
+
+
+# Every engine function that takes points, with the rest of its arguments filled in.
+POINT_ENTRY_POINTS: dict[str, Any] = {
+    "resample": lambda p: geom.resample(p, 10),
+    "resample_closed": lambda p: geom.resample(p, 10, closed=True),
+    "resample_spacing": lambda p: geom.resample_spacing(p, 1.0),
+    "clip_to_patch": lambda p: geom.clip_to_patch(p, POSE, (5, 5)),
+    "clip_to_patch_closed": lambda p: geom.clip_to_patch(p, POSE, (5, 5), closed=True),
+    "fit_curve": lambda p: geom.fit_curve(p),
+    "merge_polyline_global": lambda p: geom.merge_polyline(p, LINE),
+    "merge_polyline_detected": lambda p: geom.merge_polyline(LINE, p),
+    "polygon_union_one": lambda p: geom.polygon_union([p]),
+    "polygon_union_two": lambda p: geom.polygon_union([RING, p]),
+    "polygon_union_three": lambda p: geom.polygon_union([RING, p, RING + 1.0]),
+    "chamfer_distance": lambda p: geom.chamfer_distance(LINE, p),
+    "chamfer_matrix": lambda p: geom.chamfer_matrix([LINE], [p]),
+    "insert_divider": lambda p: _map_with_line().insert(1, p),
+    "insert_crossing": lambda p: _map_with_line().insert(0, p),
+    "insert_with_id": lambda p: _map_with_line().insert_with_id(9, 2, p),
+    "merge_divider": lambda p: _map_with_line().merge(0, p),
+    "merge_crossing": lambda p: _map_with_line().merge(1, p),
+    "replace": lambda p: _map_with_line().replace(0, p),
+}
+
+
+@pytest.mark.timeout(30)
+@pytest.mark.parametrize("func", sorted(POINT_ENTRY_POINTS))
+@pytest.mark.parametrize(
+    "bad",
+    [1e200, -1.7e308, MAX_COORD * (1 + 1e-15), -2e7],
+    ids=["1e200", "-1.7e308", "edge+", "-2e7"],
+)
+def test_coordinates_outside_the_domain_raise(func: str, bad: float) -> None:
+    """A finite coordinate beyond 1e7 m raises ValueError naming the domain, wherever it is."""
+    pts = np.array([[0.0, 0.0], [3.0, 1.0], [6.0, 0.0], [3.0, 4.0]])  # (4, 2)
+    pts[2, 1] = bad
+    with pytest.raises(ValueError, match="domain"):
+        POINT_ENTRY_POINTS[func](pts)
+
+
+@pytest.mark.timeout(30)
+def test_the_issue_cases_raise() -> None:
+    """Issue 14.3: each of these returned inf, NaN or wrong geometry from finite inputs."""
+    with pytest.raises(ValueError, match="domain"):
+        geom.chamfer_distance([[0, 0]], [[1e200, 0]])
+    ring = np.array([[1.7e308, -1.7e308], [0.0, 0.0], [10.0, 5.0]])  # (3, 2)
+    with pytest.raises(ValueError, match="domain"):
+        geom.clip_to_patch(ring, POSE, (5, 5), closed=True)
+    with pytest.raises(ValueError, match="domain"):
+        geom.clip_to_patch(ring, POSE, (5, 5))
+    m = _map_with_line()
+    with pytest.raises(ValueError, match="domain"):
+        m.sample_patch((1e39, 0, 0), (1e40, 1e40), margin=0.0)
+    with pytest.raises(ValueError, match="domain"):
+        m.sample_patch((0, 0, 0), (1e40, 1e40))
+    with pytest.raises(ValueError, match="domain"):
+        m.sample_patch((0, 0, 0), (10, 10), margin=2e7)
+    with pytest.raises(ValueError, match="domain"):
+        m.query((1e39, 0, 0), (10, 10))
+    with pytest.raises(ValueError, match="domain"):
+        geom.clip_to_patch(LINE, (0, -3e7, 0), (10, 10))
+
+
+@pytest.mark.timeout(60)
+def test_results_at_the_edges_of_the_domain_are_finite() -> None:
+    """Geometry spanning the whole domain, and tiny or subnormal geometry: every result is
+    finite (float32 ego-frame samples included)."""
+    big = np.array([[-MAX_COORD, -MAX_COORD], [MAX_COORD, -MAX_COORD], [MAX_COORD, MAX_COORD]])
+    for pts, spacing in ((big, 1e4), (big * 1e-300, 1.0), (LINE * 5e-324, 1.0), (LINE, 1.0)):
+        outs: list[np.ndarray] = []
+        for call in (
+            lambda p: geom.resample(p, 50),
+            lambda p: geom.resample(p, 50, closed=True),
+            lambda p, s=spacing: geom.resample_spacing(p, s),
+            lambda p, s=spacing: geom.fit_curve(p, 0.5, s),
+            lambda p, s=spacing: geom.merge_polyline(p, p[::-1] * 0.5, 0.5, s),
+        ):
+            try:
+                outs.append(call(pts))
+            except ValueError:  # degenerate (zero length after dedup) is a clean refusal
+                pass
+        outs += geom.clip_to_patch(pts, (0.0, 0.0, 0.1), (MAX_COORD, MAX_COORD), margin=MAX_COORD)
+        outs += geom.polygon_union([pts, pts * 0.5])
+        d = geom.chamfer_distance(pts, pts * 0.5)
+        assert np.isfinite(d)
+        assert all(np.isfinite(o).all() for o in outs)
+    m = GlobalMap(spacing=1e4)
+    m.insert(2, big)
+    m.insert(0, big)
+    _, _, pts32, _ = m.sample_patch((MAX_COORD, MAX_COORD, 0.7), (MAX_COORD, MAX_COORD), MAX_COORD)
+    assert len(pts32) == 2 and np.isfinite(pts32).all()
+    assert m.query((0.0, 0.0, 0.0), (MAX_COORD, MAX_COORD)).tolist() == [0, 1]
+
+
+def _fnv1a64(data: bytes) -> int:
+    h = 0xCBF29CE484222325
+    for b in data:
+        h = ((h ^ b) * 0x100000001B3) & 0xFFFFFFFFFFFFFFFF
+    return h
+
+
+def test_a_map_file_with_coordinates_outside_the_domain_is_refused(tmp_path: Path) -> None:
+    """A file holding a coordinate beyond 1e7 m (with a valid checksum) is not a valid map."""
+    m = GlobalMap()
+    m.insert(1, LINE)
+    path = tmp_path / "m.icmap"
+    m.save(path)
+    raw = bytearray(path.read_bytes())
+    body = raw[:-8]
+    first_x = 12 + 32 + 38  # magic + version, header, the first instance's fixed fields
+    body[first_x : first_x + 8] = np.float64(5e7).tobytes()
+    path.write_bytes(bytes(body) + _fnv1a64(bytes(body)).to_bytes(8, "little"))
+    with pytest.raises(ValueError, match="domain"):
+        GlobalMap.load(path)
+
+
+# ---------------------------------------------------------------------------------------------
+# 4. the stub's promises (python/icmapper/_icmap.pyi), each checked against the code
+
+
+def _seg_distance(p: np.ndarray, poly: np.ndarray) -> float:
+    """Distance from point p (2,) to the polyline poly (k, 2)."""
+    a, b = poly[:-1], poly[1:]  # (k-1, 2), (k-1, 2)
+    ab = b - a  # (k-1, 2)
+    t = np.clip(np.einsum("ij,ij->i", p - a, ab) / np.einsum("ij,ij->i", ab, ab), 0.0, 1.0)
+    return float(np.min(np.linalg.norm(a + ab * t[:, None] - p, axis=1)))
+
+
+@pytest.mark.timeout(30)
+def test_smoothing_zero_is_a_valid_setting() -> None:
+    """Issue 14.4: ``GlobalMap(smoothing=0)`` is accepted, as the code always did and the mapper's
+    config allows; the stub promised a ValueError. The stub now says what 0 means: the merged
+    curve interpolates every point (scipy's ``s=0``)."""
+    m = GlobalMap(smoothing=0.0)
+    assert m.smoothing == 0.0
+    i = m.insert(1, LINE)
+    m.merge(i, LINE + [0.0, 0.4])
+    assert np.isfinite(m.get(i)[1]).all()
+    pts = np.array([[0.0, 0.0], [3.0, 1.0], [6.0, -1.0], [9.0, 0.5], [12.0, 0.0]])  # (5, 2)
+    dense = geom.fit_curve(pts, s=0.0, spacing=0.01)  # (k, 2)
+    assert max(_seg_distance(q, dense) for q in pts) < 1e-4
+    smooth = geom.fit_curve(pts, s=0.5, spacing=0.01)  # (k, 2)
+    assert max(_seg_distance(q, smooth) for q in pts) > 1e-2
+
+
+@pytest.mark.parametrize(
+    "kwargs",
+    [
+        {"smoothing": -1.0},
+        {"smoothing": float("nan")},
+        {"smoothing": float("inf")},
+        {"spacing": 0.0},
+        {"spacing": -1.0},
+        {"spacing": float("nan")},
+        {"spacing": float("inf")},
+    ],
+)
+def test_global_map_settings_outside_their_range_raise(kwargs: dict[str, float]) -> None:
+    with pytest.raises(ValueError, match="smoothing|spacing"):
+        GlobalMap(**kwargs)
+
+
+def test_stub_promises_on_the_map() -> None:
+    """insert ids increase from 0 and are never reused; a failed merge leaves the instance
+    unchanged; replace keeps the first frame and counts the observation; the map refuses to be
+    pickled; ``in`` is False for anything that is not a stored id; an empty sample has the
+    documented shapes and dtypes."""
+    import pickle
+
+    m = GlobalMap()
+    assert [m.insert(1, LINE), m.insert(2, LINE)] == [0, 1]
+    m.remove(1)
+    assert m.insert(1, LINE) == 2
+    m.insert_with_id(10, 1, LINE)
+    assert m.insert(1, LINE) == 11
+    with pytest.raises(ValueError, match="already exists"):
+        m.insert_with_id(10, 1, LINE)
+    before = (m.get(0)[1].copy(), m.info(0))
+    for bad in ([[0.0, np.nan], [1.0, 1.0]], [[0.0, 0.0]], [[0.0, 0.0], [2e7, 0.0]]):
+        with pytest.raises(ValueError):
+            m.merge(0, bad, frame=5)
+    assert np.array_equal(m.get(0)[1], before[0]) and m.info(0) == before[1]
+    m.replace(0, LINE * 2.0, frame=7)
+    info = m.info(0)
+    assert (info["first_frame"], info["last_frame"], info["observations"]) == (0, 7, 2)
+    assert set(info) == {
+        "id",
+        "cls",
+        "closed",
+        "first_frame",
+        "last_frame",
+        "observations",
+        "n_points",
+    }
+    with pytest.raises(TypeError):
+        pickle.dumps(m)
+    assert not any(x in m for x in (5, -1, "0", None, 1.0, 2**64))
+    ids, cls, pts, mask = m.sample_patch((1e6, 1e6, 0.0), (1.0, 1.0), n_points=7)
+    assert [a.shape for a in (ids, cls, pts, mask)] == [(0,), (0,), (0, 7, 2), (0, 7)]
+    assert [a.dtype for a in (ids, cls, pts, mask)] == [np.uint64, np.int64, np.float32, np.bool_]
+    assert m.ids().dtype == np.uint64 and list(m.ids()) == sorted(m.ids())
+    for n_points in (1, 1_000_001):
+        with pytest.raises(ValueError, match="n_points"):
+            m.sample_patch((0.0, 0.0, 0.0), (30.0, 15.0), n_points=n_points)
+    m.insert(0, RING)
+    with pytest.raises(ValueError, match="n_points"):
+        m.sample_patch((0.0, 0.0, 0.0), (30.0, 15.0), n_points=2)
+
+
+def test_stub_promises_on_the_functions() -> None:
+    """resample_spacing's counts and cap, fit_curve's parameter ranges, polygon_union's
+    zero-area rule and order."""
+    line = np.array([[0.0, 0.0], [10.0, 0.0]])  # (2, 2)
+    assert len(geom.resample_spacing(line, 3.0)) == 5  # max(2, ceil(10 / 3) + 1)
+    assert len(geom.resample_spacing(line, 3.0, closed=True)) == 7  # max(3, ceil(20 / 3))
+    with pytest.raises(ValueError, match="spacing"):
+        geom.resample_spacing(np.array([[0.0, 0.0], [1e7, 0.0]]), 1e-3)
+    for s, spacing in ((-0.1, 1.0), (float("nan"), 1.0), (0.5, 0.0), (0.5, float("inf"))):
+        with pytest.raises(ValueError, match="`s`|spacing"):
+            geom.fit_curve(LINE, s=s, spacing=spacing)
+        with pytest.raises(ValueError, match="`s`|spacing"):
+            geom.merge_polyline(LINE, LINE, s=s, spacing=spacing)
+    flat = np.array([[0.0, 0.0], [1.0, 0.0], [2.0, 0.0]])  # (3, 2)
+    assert geom.polygon_union([flat]) == []
+    u = geom.polygon_union([flat, SQUARE, SQUARE * 0.5 + 5.0])
+    assert [round(ring_area(r), 9) for r in u] == [1.0, 0.25]
+
+
+# ---------------------------------------------------------------------------------------------
+# 5. temp files left by writers killed mid-save
+
+
+def _temps(path: Path) -> list[Path]:
+    return sorted(path.parent.glob(f".{path.name}.tmp.*"))
+
+
+@pytest.mark.timeout(300)
+def test_writers_killed_mid_save_leave_nothing_behind_for_long(tmp_path: Path) -> None:
+    """Issue 14.5: SIGKILL during repeated saves of a ~20 MB map left ``.NAME.tmp.<pid>.<n>``
+    files that later saves never removed. Now: the map file is intact after every kill (old or
+    new map); the next save keeps the dead writers' files while they may still be being created
+    (younger than a minute), and removes them all once older; a live writer's file (locked) is
+    never removed."""
+    import fcntl
+    import random
+    import time
+
+    path = tmp_path / "big.icmap"
+    package_root = Path(icmapper.__file__).resolve().parents[1]
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.pathsep.join([str(package_root), env.get("PYTHONPATH", "")])
+    code = f"""
+        import numpy as np
+        from icmapper import GlobalMap
+        m = GlobalMap()
+        rng = np.random.default_rng(0)
+        for _ in range(200):
+            m.insert(1, np.cumsum(rng.normal(0.0, 1.0, (4000, 2)), axis=0))
+        m.save({str(path)!r})
+        print("ready", flush=True)
+        while True:
+            m.save({str(path)!r})
+    """
+    rnd = random.Random(0)
+    for _ in range(6):
+        proc = subprocess.Popen(
+            [sys.executable, "-c", textwrap.dedent(code)],
+            stdout=subprocess.PIPE,
+            text=True,
+            env=env,
+            preexec_fn=_limit_memory,
+        )
+        assert proc.stdout is not None and proc.stdout.readline().strip() == "ready"
+        time.sleep(rnd.uniform(0.05, 0.4))
+        proc.kill()
+        proc.wait()
+        assert len(GlobalMap.load(path)) == 200  # never a torn map file
+    left = _temps(path)
+    assert left, "no kill landed mid-save (unlikely): nothing to test"
+    m = GlobalMap.load(path)
+    m.save(path)
+    assert _temps(path) == left  # too young to tell from a writer that is creating its file
+    live = path.parent / f".{path.name}.tmp.777.0"
+    with live.open("wb") as f:
+        fcntl.flock(f, fcntl.LOCK_EX)
+        old = time.time() - 120.0
+        for p in [*left, live]:
+            os.utime(p, (old, old))
+        m.save(path)
+        assert _temps(path) == [live]  # the dead writers' files are gone, the live one kept
+    os.utime(live, (old, old))
+    m.save(path)
+    assert _temps(path) == []
+    assert len(GlobalMap.load(path)) == 200
+
+
+# ---------------------------------------------------------------------------------------------
+# every entry point returns or raises in bounded time, with a clean exception
+
+
+@pytest.mark.timeout(300)
+def test_every_entry_point_returns_or_raises_cleanly_on_extreme_input() -> None:
+    """3,000 calls of every engine entry point on random extreme input (huge, tiny, subnormal,
+    NaN/inf, negative and huge counts and extents, duplicate points, empty sets), in a child
+    interpreter under a wall-clock and a memory limit: every call returns or raises ValueError,
+    TypeError or KeyError (no panic, no abort, no hang); every returned array is finite."""
+    code = """
+        import json
+        import numpy as np
+        from icmapper import GlobalMap, geom
+
+        rng = np.random.default_rng(14)
+        SPECIAL = [0.0, -0.0, 1e7, -1e7, 1e7 * (1 + 1e-15), 5e-324, -2.2e-308, 1e-300, 1e200,
+                   -1.7e308, float("nan"), float("inf"), 3.0, -12.5]
+
+        def value():
+            r = rng.random()
+            if r < 0.35:
+                return float(SPECIAL[rng.integers(len(SPECIAL))])
+            if r < 0.7:
+                return float(rng.uniform(-50.0, 50.0))
+            return float(rng.choice([-1.0, 1.0]) * 10.0 ** rng.uniform(-320.0, 12.0))
+
+        def pts(lo=0, hi=9):
+            n = int(rng.integers(lo, hi))
+            p = np.array([[value(), value()] for _ in range(n)]).reshape(n, 2)
+            if n > 1 and rng.random() < 0.2:
+                p[1] = p[0]
+            return p
+
+        def count():
+            return int(rng.choice([-1, 0, 1, 2, 3, 20, 10**7 + 1, 10**12, 2**63 - 1, 2**64]))
+
+        def pose():
+            return (value(), value(), value())
+
+        def ext():
+            return (value(), value())
+
+        m = GlobalMap()
+        m.insert(1, [[0.0, 0.0], [10.0, 0.0], [20.0, 3.0]])
+        m.insert(0, [[0.0, 0.0], [4.0, 0.0], [4.0, 2.0], [0.0, 2.0]])
+        calls = [
+            lambda: geom.resample(pts(), count(), closed=bool(rng.integers(2))),
+            lambda: geom.resample_spacing(pts(), value(), closed=bool(rng.integers(2))),
+            lambda: geom.clip_to_patch(pts(), pose(), ext(), value(), bool(rng.integers(2))),
+            lambda: geom.fit_curve(pts(), value(), value()),
+            lambda: geom.merge_polyline(pts(), pts(), value(), value()),
+            lambda: geom.polygon_union([pts() for _ in range(int(rng.integers(0, 4)))]),
+            lambda: geom.chamfer_distance(pts(), pts()),
+            lambda: geom.chamfer_matrix([pts(1) for _ in range(2)], [pts(1)]),
+            lambda: m.insert(int(rng.integers(-1, 4)), pts(), frame=count()),
+            lambda: m.merge(int(rng.integers(0, 3)), pts(), frame=count()),
+            lambda: m.merge_many([0, 1, 0], [pts(), pts(), pts()], frame=0),
+            lambda: m.replace(int(rng.integers(0, 3)), pts()),
+            lambda: m.query(pose(), ext(), value()),
+            lambda: m.sample_patch(pose(), ext(), value(), count()),
+            lambda: GlobalMap(value(), value()),
+        ]
+        bad = []
+        for i in range(3000):
+            k = int(rng.integers(len(calls)))
+            try:
+                out = calls[k]()
+            except (ValueError, TypeError, KeyError):
+                continue
+            except BaseException as e:
+                bad.append(f"call {k}: {type(e).__name__}: {e}")
+                continue
+            arrays = out if isinstance(out, (list, tuple)) else [out]
+            for a in arrays:
+                if isinstance(a, np.ndarray) and a.dtype.kind == "f" and not np.isfinite(a).all():
+                    bad.append(f"call {k}: non-finite result")
+                if isinstance(a, float) and not np.isfinite(a):
+                    bad.append(f"call {k}: non-finite result {a}")
+        print(json.dumps(bad))
+    """
+    proc = run_child(code, timeout=240)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    assert json.loads(proc.stdout) == []

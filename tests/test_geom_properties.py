@@ -173,7 +173,7 @@ def test_globalmap_any_input(cls: int, pts: np.ndarray, frame: int, smoothing: f
         m = GlobalMap(smoothing=smoothing, spacing=spacing)
     except CLEAN:
         return
-    assert np.isfinite(m.smoothing) and m.smoothing > 0 and np.isfinite(m.spacing)
+    assert np.isfinite(m.smoothing) and m.smoothing >= 0 and np.isfinite(m.spacing)
     try:
         i = m.insert(cls, pts, frame=frame)
     except CLEAN:

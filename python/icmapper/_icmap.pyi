@@ -6,6 +6,11 @@ results are float64 unless stated. A ``pose`` is ``(x, y, yaw)`` ego -> world, `
 ``(hx, hy)`` along the ego x / y axes. Classes: 0 ped_crossing (closed ring, first point not
 repeated), 1 divider, 2 boundary (open polylines).
 
+Coordinate domain: every coordinate (points, the ``x``, ``y`` of a pose, stored map files) is
+finite with ``|x|, |y| <= 1e7`` m, and half extents and margins are at most 1e7 m; ``yaw`` is any
+finite angle. Anything outside raises ``ValueError`` (naming the value) at the call, instead of
+computing overflowed, infinite or NaN results; inside it every result is finite.
+
 Errors: ``ValueError`` for bad values (NaN/inf, too few points, degenerate geometry, bad
 parameters, unknown class, wrong shapes, duplicate id, corrupt map file), ``TypeError`` for wrong
 types/dtypes (complex, object, str), ``KeyError`` for an unknown instance id, ``OSError`` (with the
@@ -42,7 +47,9 @@ def resample_spacing(points: ArrayLike2, spacing: float = 1.0, closed: bool = Fa
     """Points about ``spacing`` metres apart by arc length.
 
     points: (m, 2). Returns (k, 2) float64 with ``k = max(2, ceil(L / spacing) + 1)`` for an open
-    polyline (ends kept) and ``k = max(3, ceil(L / spacing))`` for a closed contour.
+    polyline (ends kept) and ``k = max(3, ceil(L / spacing))`` for a closed contour. ValueError
+    as ``resample``, for a non-finite or non-positive ``spacing``, and when ``k`` would exceed
+    10,000,000.
     """
 
 def clip_to_patch(
@@ -65,6 +72,8 @@ def fit_curve(points: ArrayLike2, s: float = 0.5, spacing: float = 1.0) -> F64:
 
     points: (m, 2), m >= 2 distinct points (degree drops to m - 1 for 2 or 3 points). Returns the
     fitted curve evaluated about ``spacing`` metres apart, ends included: (k, 2) float64.
+    ``s``: finite, >= 0 (0 interpolates every point); ``spacing``: finite, > 0; ValueError
+    otherwise, and when the curve would need 10,000,000 points or more.
     """
 
 def merge_polyline(
@@ -74,7 +83,8 @@ def merge_polyline(
 
     global_pts: (m, 2), detected_pts: (d, 2). The detection's orientation is decided from the
     geometry; the merged points are fitted (``fit_curve`` with ``s``) and resampled about
-    ``spacing`` apart. The result keeps the global direction: (k, 2) float64.
+    ``spacing`` apart. The result keeps the global direction: (k, 2) float64. ``s`` and
+    ``spacing`` as for ``fit_curve``.
     """
 
 def polygon_union(rings: Sequence[ArrayLike2] | npt.NDArray[np.floating[Any]]) -> list[F64]:
@@ -82,6 +92,8 @@ def polygon_union(rings: Sequence[ArrayLike2] | npt.NDArray[np.floating[Any]]) -
 
     Returns the outer rings of the union (holes dropped), counter-clockwise, largest area first;
     several rings when the union falls apart. Each ring (k, 2) float64, first point not repeated.
+    Every input ring needs at least 3 points; a ring of zero area (also one so small that its
+    area underflows) contributes nothing, so all-degenerate input gives ``[]``.
     """
 
 def chamfer_distance(a: ArrayLike2, b: ArrayLike2) -> float:
@@ -122,8 +134,10 @@ class GlobalMap:
     """
 
     def __init__(self, smoothing: float = 0.5, spacing: float = 1.0) -> None:
-        """An empty map; ``smoothing``: the curve-fit ``s`` on merge; ``spacing``: metres between
-        stored points. ValueError on non-finite or non-positive values."""
+        """An empty map; ``smoothing``: the curve-fit ``s`` on merge, finite and >= 0 (0: merged
+        polylines interpolate every point, scipy's ``s=0``); ``spacing``: metres between stored
+        points, finite and > 0. ValueError otherwise (negative or non-finite ``smoothing``,
+        non-positive or non-finite ``spacing``)."""
 
     @property
     def smoothing(self) -> float:
@@ -234,14 +248,18 @@ class GlobalMap:
         Returns ``(ids (k,) uint64, cls (k,) int64, pts (k, n_points, 2) float32, mask
         (k, n_points) bool)``; ``pts`` in the EGO frame of ``pose``; ``mask[i, j]``: point j
         connects to point j + 1 on the same clipped piece (for a crossing clipped to a single
-        ring the last entry is True). k = 0 gives empty arrays of these shapes.
+        ring the last entry is True). k = 0 gives empty arrays of these shapes. ``n_points``:
+        2 to 1,000,000 (at least 3 when a crossing is sampled); ValueError otherwise.
         """
 
     def save(self, path: PathArg, compact: bool = False) -> None:
-        """Writes the native map file (format 2) atomically (temp file + rename); OSError on I/O
-        failure. ``compact=False`` stores coordinates bit for bit; ``compact=True`` rounds them to
-        a 0.1 mm grid (a loaded coordinate is at most 0.05 mm off) and delta-codes them: about a
-        fifth of the size for densely sampled polylines. Provenance is kept either way."""
+        """Writes the native map file (format 2) atomically (temp file ``.NAME.tmp.<pid>.<n>`` +
+        rename); OSError on I/O failure. ``compact=False`` stores coordinates bit for bit;
+        ``compact=True`` rounds them to a 0.1 mm grid (a loaded coordinate is at most 0.05 mm off)
+        and delta-codes them: about a fifth of the size for densely sampled polylines. Provenance
+        is kept either way. A writer killed mid-save leaves the map file intact (old or new); the
+        temp files of dead writers are removed by the next save into the same folder (each writer
+        holds a lock on its temp file, so a live writer's is never removed)."""
 
     @staticmethod
     def load(path: PathArg, bbox: tuple[float, float, float, float] | None = None) -> GlobalMap:

@@ -7,10 +7,11 @@
 
 use crate::error::{GeomError, Result};
 use crate::resample::{cumulative_lengths, points_at_lengths, polyline_length};
-use crate::types::{validate_points, Patch, Point};
+use crate::types::{in_domain, validate_points, Patch, Point};
 
+/// Whether `p` lies in the coordinate domain ([`crate::types::MAX_COORD`]; NaN and inf do not).
 fn finite(p: &Point) -> bool {
-    p.x.is_finite() && p.y.is_finite()
+    in_domain(p.x) && in_domain(p.y)
 }
 
 /// Liang-Barsky: the parameter range `[t0, t1]` of the ego-frame segment `a -> b` inside the box
@@ -58,8 +59,13 @@ fn flush(cur: &mut Vec<Point>, pieces: &mut Vec<Vec<Point>>) {
 /// The parts of an open polyline inside `patch`, in world coordinates, in the polyline's order.
 /// Each piece has at least 2 points (entry/exit points are exact segment-rectangle intersections)
 /// and positive length (pieces that only touch the patch are dropped). Vertices inside the patch
-/// are returned unchanged. Segments with a non-finite end point are treated as outside.
+/// are returned unchanged. Segments with an end point outside the coordinate domain (non-finite
+/// or beyond [`MAX_COORD`](crate::types::MAX_COORD)) are treated as outside; a patch that
+/// [`Patch::new`] would refuse contains nothing.
 pub fn clip_polyline(points: &[Point], patch: &Patch) -> Vec<Vec<Point>> {
+    if !patch.is_valid() {
+        return Vec::new();
+    }
     let (hx, hy) = (patch.half_extents.x, patch.half_extents.y);
     let iso = patch.pose.isometry();
     // Every vertex inside (the common case for a patch with a margin): Liang-Barsky keeps every
@@ -67,7 +73,7 @@ pub fn clip_polyline(points: &[Point], patch: &Patch) -> Vec<Vec<Point>> {
     if points.len() >= 2
         && points.iter().all(|p| {
             let e = iso.inverse_transform_point(p);
-            e.x.abs() <= hx && e.y.abs() <= hy
+            e.x.abs() <= hx && e.y.abs() <= hy && finite(p)
         })
     {
         let mut pieces = Vec::new();
@@ -153,8 +159,12 @@ pub(crate) fn signed_area2(ring: &[Point]) -> f64 {
 /// A closed ring clipped to `patch` (the patch is convex: Sutherland-Hodgman), world coordinates,
 /// without repeating the first point. A repeated closing point in the input is ignored. Empty when
 /// the ring lies outside the patch, when the clipped ring has no area, or when the ring has fewer
-/// than 3 points or a non-finite coordinate.
+/// than 3 points or a coordinate outside the domain (non-finite or beyond
+/// [`MAX_COORD`](crate::types::MAX_COORD)), or when [`Patch::new`] would refuse the patch.
 pub fn clip_polygon(ring: &[Point], patch: &Patch) -> Vec<Point> {
+    if !patch.is_valid() {
+        return Vec::new();
+    }
     clip_polygon_impl(ring, patch, true)
 }
 
@@ -293,7 +303,7 @@ fn sample_piece(piece: &[Point], count: usize, closed: bool) -> Vec<Point> {
 /// remainder (P pieces of positive length, total length L). With `closed`, every piece is a ring
 /// (closing edge included) sampled from its first point with `c_i ~ n L_i / L` points. When there
 /// are more pieces than points, the `n` longest pieces get one point each. Zero-length pieces get
-/// no points. Errors on non-finite points and on `n < 2` (`n < 3` for closed).
+/// no points. Errors on points outside the coordinate domain and on `n < 2` (`n < 3` for closed).
 pub fn sample_pieces(
     pieces: &[Vec<Point>],
     closed: bool,

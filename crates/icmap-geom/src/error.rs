@@ -8,6 +8,10 @@ pub enum GeomError {
     /// A coordinate or parameter is NaN or infinite.
     #[error("{what} contains a non-finite value (NaN or inf)")]
     NonFinite { what: String },
+    /// A finite coordinate outside the engine's domain (`|x|, |y| <= MAX_COORD`, see
+    /// [`crate::types::MAX_COORD`]).
+    #[error("{what} has a coordinate {value:e} outside the valid domain |x|, |y| <= 1e7 m")]
+    OutOfDomain { what: String, value: f64 },
     /// Geometry with fewer points than the operation needs (empty, one point, ...).
     #[error("{what} has {got} point(s); at least {min} are required")]
     TooFewPoints {

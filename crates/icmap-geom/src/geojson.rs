@@ -89,7 +89,7 @@ mod tests {
             Instance {
                 id: 4,
                 class: MapClass::Boundary,
-                points: vec![p(0.5, -1.0), p(2.0, 1e-7), p(3.0, 1e12)],
+                points: vec![p(0.5, -1.0), p(2.0, 1e-7), p(3.0, 9999999.25)],
                 closed: false,
                 first_frame: 1,
                 last_frame: 8,
@@ -115,7 +115,7 @@ mod tests {
         assert!(s.starts_with("{\"type\":\"FeatureCollection\",\"features\":["));
         // Ascending ids: the crossing (id 1) comes first, closed and counter-clockwise.
         let poly = "{\"type\":\"Feature\",\"geometry\":{\"type\":\"Polygon\",\"coordinates\":[[[0.0,0.0],[1.0,0.0],[1.0,1.0],[0.0,1.0],[0.0,0.0]]]},\"properties\":{\"id\":1,\"class\":0,\"class_name\":\"ped_crossing\",\"observations\":1,\"first_frame\":-2,\"last_frame\":0}}";
-        let line = "{\"type\":\"Feature\",\"geometry\":{\"type\":\"LineString\",\"coordinates\":[[0.5,-1.0],[2.0,1e-7],[3.0,1000000000000.0]]},\"properties\":{\"id\":4,\"class\":2,\"class_name\":\"boundary\",\"observations\":3,\"first_frame\":1,\"last_frame\":8}}";
+        let line = "{\"type\":\"Feature\",\"geometry\":{\"type\":\"LineString\",\"coordinates\":[[0.5,-1.0],[2.0,1e-7],[3.0,9999999.25]]},\"properties\":{\"id\":4,\"class\":2,\"class_name\":\"boundary\",\"observations\":3,\"first_frame\":1,\"last_frame\":8}}";
         assert_eq!(
             s,
             format!("{{\"type\":\"FeatureCollection\",\"features\":[\n{poly},\n{line}\n]}}\n")

@@ -27,10 +27,12 @@
 use crate::error::{GeomError, Result};
 use crate::store::{GlobalMap, Instance, MapConfig};
 use crate::types::{MapClass, Point};
+use std::ffi::{OsStr, OsString};
 use std::fs::{self, File, OpenOptions};
 use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};
+use std::time::{Duration, SystemTime};
 
 /// First bytes of every map file.
 pub const MAGIC: &[u8; 8] = b"ICMAPGM\0";
@@ -102,9 +104,16 @@ pub fn load(path: &Path) -> Result<GlobalMap> {
     parse(&bytes, &path.display().to_string())
 }
 
-/// Writes `bytes` to `path` atomically: a temporary file in the same folder is written, fsynced and
-/// renamed over `path`; the folder is then fsynced (best effort). On error the temporary file is
-/// removed and `path` is untouched.
+/// Writes `bytes` to `path` atomically: a temporary file `.NAME.tmp.<pid>.<n>` in the same folder
+/// is written, fsynced and renamed over `path`; the folder is then fsynced (best effort). On error
+/// the temporary file is removed and `path` is untouched.
+///
+/// A writer that is killed mid-save cannot remove its temporary file. So every writer holds an
+/// exclusive lock (`flock`) on its temporary file from creating it to the rename, and every save
+/// first removes the temporary files of `path` that nobody holds a lock on and that have not been
+/// written to for [`STALE_TEMP_AGE`] ([`remove_stale_temps`]): the kernel releases the locks of a
+/// dead process, never those of a live one (whatever its PID namespace), and the age covers the
+/// instant between creating a file and locking it.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
     static COUNTER: AtomicU64 = AtomicU64::new(0);
     let io_err = |p: &Path| {
@@ -122,25 +131,36 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
         Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
         _ => PathBuf::from("."),
     };
-    let mut tmp_name = std::ffi::OsString::from(".");
-    tmp_name.push(file_name);
-    tmp_name.push(format!(
-        ".tmp.{}.{}",
-        std::process::id(),
-        COUNTER.fetch_add(1, Ordering::Relaxed)
-    ));
-    let tmp = dir.join(tmp_name);
+    remove_stale_temps(&dir, file_name);
+    // A name left by a dead process with this PID (a reused PID) is skipped, not an error.
+    let (tmp, mut f) = (|| {
+        let mut last = None;
+        for _ in 0..64 {
+            let mut tmp_name = temp_prefix(file_name);
+            tmp_name.push(format!(
+                "{}.{}",
+                std::process::id(),
+                COUNTER.fetch_add(1, Ordering::Relaxed)
+            ));
+            let tmp = dir.join(tmp_name);
+            match OpenOptions::new().write(true).create_new(true).open(&tmp) {
+                Ok(f) => return Ok((tmp, f)),
+                Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => last = Some((tmp, e)),
+                Err(e) => return Err(io_err(&tmp)(e)),
+            }
+        }
+        let (tmp, e) = last.expect("at least one attempt");
+        Err(io_err(&tmp)(e))
+    })()?;
     let result = (|| {
-        let mut f = OpenOptions::new()
-            .write(true)
-            .create_new(true)
-            .open(&tmp)
-            .map_err(io_err(&tmp))?;
+        // (A file system without locks: nobody can tell this file from a dead writer's, and
+        // `remove_stale_temps` removes nothing there either.)
+        let _ = f.lock();
         f.write_all(bytes).map_err(io_err(&tmp))?;
         f.sync_all().map_err(io_err(&tmp))?;
-        drop(f);
         fs::rename(&tmp, path).map_err(io_err(path))
     })();
+    drop(f);
     if result.is_err() {
         let _ = fs::remove_file(&tmp);
         return result;
@@ -150,6 +170,68 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
         let _ = d.sync_all();
     }
     Ok(())
+}
+
+/// A temporary file of a save is stale (its writer died) when nobody holds its lock and nothing
+/// was written to it for this long (see [`write_atomic`]).
+pub const STALE_TEMP_AGE: Duration = Duration::from_secs(60);
+
+/// `.NAME.tmp.`: the start of the temporary files of `NAME`.
+fn temp_prefix(file_name: &OsStr) -> OsString {
+    let mut s = OsString::from(".");
+    s.push(file_name);
+    s.push(".tmp.");
+    s
+}
+
+/// Whether `name` is `prefix` followed by `<digits>.<digits>`.
+fn is_temp_name(name: &OsStr, prefix: &OsStr) -> bool {
+    let Some(rest) = name
+        .as_encoded_bytes()
+        .strip_prefix(prefix.as_encoded_bytes())
+    else {
+        return false;
+    };
+    let digits = |s: &[u8]| !s.is_empty() && s.iter().all(u8::is_ascii_digit);
+    let mut parts = rest.split(|&b| b == b'.');
+    matches!(
+        (parts.next(), parts.next(), parts.next()),
+        (Some(pid), Some(n), None) if digits(pid) && digits(n)
+    )
+}
+
+/// Removes the temporary files `.NAME.tmp.<pid>.<n>` of saves of `dir/NAME` whose writers died
+/// (killed mid-save): those nobody holds a lock on and that were last written
+/// [`STALE_TEMP_AGE`] ago or more. A live writer's file is never removed (it holds the lock), nor
+/// any other file. Best effort (errors skip a file); returns how many were removed.
+pub fn remove_stale_temps(dir: &Path, file_name: &OsStr) -> usize {
+    let Ok(entries) = fs::read_dir(dir) else {
+        return 0;
+    };
+    let prefix = temp_prefix(file_name);
+    let now = SystemTime::now();
+    let mut removed = 0;
+    for entry in entries.flatten() {
+        if !is_temp_name(&entry.file_name(), &prefix) {
+            continue;
+        }
+        let path = entry.path();
+        let Ok(f) = File::open(&path) else {
+            continue;
+        };
+        let stale = f
+            .metadata()
+            .and_then(|m| m.modified())
+            .ok()
+            .and_then(|t| now.duration_since(t).ok())
+            .is_some_and(|age| age >= STALE_TEMP_AGE);
+        // `try_lock` fails while another open file holds the lock (a live writer), and where
+        // locks are unsupported. The file is removed while this lock is held.
+        if stale && f.try_lock().is_ok() && fs::remove_file(&path).is_ok() {
+            removed += 1;
+        }
+    }
+    removed
 }
 
 /// A bounds-checked little-endian reader.
@@ -379,6 +461,68 @@ mod tests {
             GeomError::Format { reason, .. } => reason,
             other => panic!("expected a Format error, got {other:?}"),
         }
+    }
+
+    /// Issue 14.5: writers killed mid-save left `.NAME.tmp.<pid>.<n>` files (up to 160 MB each)
+    /// that no later save removed. A save now removes those of dead writers (unlocked, not
+    /// written to for a minute), whatever their PID, and nothing else: not a live writer's
+    /// (locked), not one just created, not another file's.
+    #[test]
+    fn saves_remove_the_temp_files_of_dead_writers_only() {
+        let dir = std::env::temp_dir().join(format!("icmap-stale-{}", std::process::id()));
+        let _ = fs::remove_dir_all(&dir);
+        fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("map.icmap");
+        let hour_ago = SystemTime::now() - Duration::from_secs(3600);
+        let make = |name: &str, old: bool| -> File {
+            let mut f = File::create(dir.join(name)).unwrap();
+            f.write_all(b"partial map").unwrap();
+            if old {
+                f.set_modified(hour_ago).unwrap();
+            }
+            f
+        };
+        let pid = std::process::id();
+        let dead = [
+            ".map.icmap.tmp.123.0".to_string(),
+            ".map.icmap.tmp.99999999.17".to_string(),
+            format!(".map.icmap.tmp.{pid}.999999"), // this PID, reused: no lock, so dead
+        ];
+        for name in &dead {
+            make(name, true);
+        }
+        let live = make(".map.icmap.tmp.42.1", true);
+        live.lock().unwrap();
+        let keep = [
+            ".map.icmap.tmp.42.1",      // a live writer's (locked)
+            ".map.icmap.tmp.43.0",      // just created (younger than STALE_TEMP_AGE)
+            ".other.icmap.tmp.1.2",     // another map's
+            ".map.icmap.tmp.x.1",       // not <pid>.<n>
+            ".map.icmap.tmp.1.2.3",     //
+            ".map.icmap.tmp.1.",        //
+            ".map.icmap.tmp..1",        //
+            "map.icmap.tmp.1.2",        // no leading dot
+            ".map.icmap.tmp.1.2.extra", //
+        ];
+        for name in &keep[1..] {
+            make(name, !name.contains(".43."));
+        }
+        save(&sample_map(), &path).unwrap();
+        let mut names: Vec<String> = fs::read_dir(&dir)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().into_string().unwrap())
+            .collect();
+        names.sort();
+        let mut want: Vec<String> = keep.iter().map(|s| s.to_string()).collect();
+        want.push("map.icmap".into());
+        want.sort();
+        assert_eq!(names, want);
+        same(&sample_map(), &load(&path).unwrap());
+        // The live writer dies (its lock goes with it): the next save removes its file.
+        drop(live);
+        assert_eq!(remove_stale_temps(&dir, OsStr::new("map.icmap")), 1);
+        assert!(!dir.join(".map.icmap.tmp.42.1").exists());
+        fs::remove_dir_all(&dir).unwrap();
     }
 
     #[test]

@@ -362,9 +362,10 @@ mod tests {
             resample(&line, 2, true),
             Err(GeomError::InvalidParameter { .. })
         ));
+        // Outside the coordinate domain (issue 14.3: the length overflowed to inf).
         assert!(matches!(
             resample(&[p(-1e308, 0.0), p(1e308, 0.0)], 5, false),
-            Err(GeomError::NonFinite { .. })
+            Err(GeomError::OutOfDomain { .. })
         ));
         assert!(matches!(
             resample_spacing(&line, 0.0, false),
@@ -375,8 +376,12 @@ mod tests {
             Err(GeomError::InvalidParameter { .. })
         ));
         assert!(matches!(
-            resample_spacing(&[p(0.0, 0.0), p(1e150, 0.0)], 1.0, false),
+            resample_spacing(&[p(0.0, 0.0), p(1e7, 0.0)], 1e-3, false),
             Err(GeomError::InvalidParameter { .. })
+        ));
+        assert!(matches!(
+            resample_spacing(&[p(0.0, 0.0), p(1e150, 0.0)], 1.0, false),
+            Err(GeomError::OutOfDomain { .. })
         ));
     }
 

@@ -218,17 +218,6 @@ fn points_aabb(points: &[Point]) -> Aabb {
     Aabb::new(mins, maxs)
 }
 
-fn patch_is_finite(patch: &Patch) -> bool {
-    let p = &patch.pose;
-    p.x.is_finite()
-        && p.y.is_finite()
-        && p.yaw.is_finite()
-        && patch.half_extents.x.is_finite()
-        && patch.half_extents.y.is_finite()
-        && patch.half_extents.x >= 0.0
-        && patch.half_extents.y >= 0.0
-}
-
 impl GlobalMap {
     /// An empty map.
     pub fn new(config: MapConfig) -> Result<Self> {
@@ -700,9 +689,10 @@ impl GlobalMap {
     }
 
     /// Ids (ascending) of the instances whose geometry intersects the patch (exact test after the
-    /// bounding-box query). A patch with non-finite or negative values intersects nothing.
+    /// bounding-box query). A patch that [`Patch::new`] would refuse (non-finite, negative or
+    /// outside the coordinate domain) intersects nothing.
     pub fn query(&self, patch: &Patch) -> Vec<u64> {
-        if !patch_is_finite(patch) {
+        if !patch.is_valid() {
             return Vec::new();
         }
         self.candidates(patch)
@@ -720,13 +710,18 @@ impl GlobalMap {
 
     /// Every instance in the patch clipped to it and sampled evenly to `n_points` in the ego frame.
     ///
-    /// Instances whose clipped geometry has zero length are skipped. Errors on a non-finite or
-    /// negative patch, on `n_points < 2` or `> MAX_PATCH_POINTS`, and on `n_points < 3` when a
-    /// closed crossing is to be sampled.
+    /// Instances whose clipped geometry has zero length are skipped. Errors on a patch that
+    /// [`Patch::new`] would refuse (non-finite, negative, outside the domain), on `n_points < 2`
+    /// or `> MAX_PATCH_POINTS`, and on `n_points < 3` when a closed crossing is to be sampled.
     pub fn sample_patch(&self, patch: &Patch, n_points: usize) -> Result<PatchSample> {
-        if !patch_is_finite(patch) {
-            return Err(GeomError::NonFinite {
-                what: "patch (pose or half extents, or negative extents)".into(),
+        if !patch.is_valid() {
+            patch.pose.check()?;
+            return Err(GeomError::InvalidParameter {
+                name: "half_extents",
+                reason: format!(
+                    "the patch's half extents must be finite and in [0, 2e7] m, got {:?}",
+                    patch.half_extents
+                ),
             });
         }
         if !(2..=MAX_PATCH_POINTS).contains(&n_points) {

@@ -7,6 +7,35 @@ use parry2d_f64::bounding_volume::Aabb;
 /// A point in metres (world or ego frame, as the function says).
 pub type Point = Point2<f64>;
 
+/// The engine's coordinate domain: every coordinate (of points and poses) is finite with
+/// `|x|, |y| <= MAX_COORD` metres, and half extents and margins of a patch are at most
+/// `MAX_COORD`. Every entry point rejects values outside it ([`GeomError::OutOfDomain`],
+/// [`GeomError::NonFinite`]) instead of computing overflowed or NaN results.
+///
+/// 1e7 m (10,000 km) holds any map frame in use: city frames of a few km (Argoverse 2,
+/// nuScenes), and UTM eastings / northings (< 1e6 / 1e7 m). Inside it every derived quantity
+/// stays far from overflow (squared distances below 1e15 m^2), float64 resolves about 2e-9 m at
+/// its edge, and ego-frame offsets of a patch fit float32.
+pub const MAX_COORD: f64 = 1e7;
+
+/// Whether `v` lies in the coordinate domain (finite, `|v| <= MAX_COORD`; NaN does not).
+#[inline]
+pub fn in_domain(v: f64) -> bool {
+    v.abs() <= MAX_COORD
+}
+
+/// The error for a value `v` of `what` that is not [`in_domain`]: non-finite or out of the domain.
+pub fn domain_error(what: &str, v: f64) -> GeomError {
+    if v.is_finite() {
+        GeomError::OutOfDomain {
+            what: what.into(),
+            value: v,
+        }
+    } else {
+        GeomError::NonFinite { what: what.into() }
+    }
+}
+
 /// Map element classes, in StreamMapNet's order.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 #[repr(u8)]
@@ -64,14 +93,32 @@ pub struct Pose2 {
 }
 
 impl Pose2 {
-    /// A pose; errors if any component is not finite.
+    /// A pose; errors if a component is not finite or the position lies outside the coordinate
+    /// domain ([`MAX_COORD`]).
     pub fn new(x: f64, y: f64, yaw: f64) -> Result<Self> {
-        if !(x.is_finite() && y.is_finite() && yaw.is_finite()) {
+        let pose = Pose2 { x, y, yaw };
+        pose.check()?;
+        Ok(pose)
+    }
+
+    /// Errors unless the pose is one [`Pose2::new`] accepts (its fields are public).
+    pub fn check(&self) -> Result<()> {
+        if !self.yaw.is_finite() {
             return Err(GeomError::NonFinite {
                 what: "pose".into(),
             });
         }
-        Ok(Pose2 { x, y, yaw })
+        for v in [self.x, self.y] {
+            if !in_domain(v) {
+                return Err(domain_error("pose", v));
+            }
+        }
+        Ok(())
+    }
+
+    /// Whether the pose is one [`Pose2::new`] accepts (its fields are public).
+    pub fn is_valid(&self) -> bool {
+        in_domain(self.x) && in_domain(self.y) && self.yaw.is_finite()
     }
 
     /// The isometry ego -> world.
@@ -100,8 +147,10 @@ pub struct Patch {
 
 impl Patch {
     /// The patch of `pose` with half extents `(hx + margin, hy + margin)`. Errors on non-finite
-    /// values or on negative resulting extents (a negative `hx`, `hy` or `margin` is rejected).
+    /// values, on negative resulting extents (a negative `hx`, `hy` or `margin` is rejected), on
+    /// a value above [`MAX_COORD`], and on a pose outside the domain.
     pub fn new(pose: Pose2, hx: f64, hy: f64, margin: f64) -> Result<Self> {
+        pose.check()?;
         for (name, v) in [
             ("half_extents", hx),
             ("half_extents", hy),
@@ -109,6 +158,9 @@ impl Patch {
         ] {
             if !v.is_finite() {
                 return Err(GeomError::NonFinite { what: name.into() });
+            }
+            if v > MAX_COORD {
+                return Err(domain_error(name, v));
             }
             if v < 0.0 {
                 return Err(GeomError::InvalidParameter {
@@ -125,6 +177,15 @@ impl Patch {
             pose,
             half_extents: Vector2::new(hx + margin, hy + margin),
         })
+    }
+
+    /// Whether the patch is one [`Patch::new`] accepts (its fields are public): a valid pose and
+    /// half extents in `[0, 2 MAX_COORD]`.
+    pub fn is_valid(&self) -> bool {
+        let (hx, hy) = (self.half_extents.x, self.half_extents.y);
+        self.pose.is_valid()
+            && (0.0..=2.0 * MAX_COORD).contains(&hx)
+            && (0.0..=2.0 * MAX_COORD).contains(&hy)
     }
 
     /// Whether a world point lies inside the patch (boundary included).
@@ -153,8 +214,8 @@ impl Patch {
     }
 }
 
-/// Checks that `points` has at least `min` points and only finite coordinates; `what` names the
-/// geometry in the error message.
+/// Checks that `points` has at least `min` points and only coordinates in the domain (finite,
+/// `|x|, |y| <= MAX_COORD`); `what` names the geometry in the error message.
 pub fn validate_points(points: &[Point], min: usize, what: &str) -> Result<()> {
     if points.len() < min {
         return Err(GeomError::TooFewPoints {
@@ -163,8 +224,20 @@ pub fn validate_points(points: &[Point], min: usize, what: &str) -> Result<()> {
             min,
         });
     }
-    if points.iter().any(|p| !(p.x.is_finite() && p.y.is_finite())) {
-        return Err(GeomError::NonFinite { what: what.into() });
+    if !points_in_domain(points) {
+        // The first offending value decides the error (NaN / inf, or finite but too large).
+        let bad = points
+            .iter()
+            .flat_map(|p| [p.x, p.y])
+            .find(|&v| !in_domain(v))
+            .unwrap_or(f64::NAN);
+        return Err(domain_error(what, bad));
     }
     Ok(())
+}
+
+/// Whether every coordinate of `points` is [`in_domain`].
+#[inline]
+pub fn points_in_domain(points: &[Point]) -> bool {
+    points.iter().all(|p| in_domain(p.x) && in_domain(p.y))
 }

@@ -5,7 +5,7 @@
 
 use crate::clip::{open_ring, signed_area2};
 use crate::error::Result;
-use crate::types::{validate_points, Point};
+use crate::types::{points_in_domain, validate_points, Point};
 use geo::{BooleanOps, Coord, LineString, MapCoordsInPlace, MultiPolygon, Polygon};
 
 /// Union of many polygons by pairwise unions in a balanced tree. geo's `unary_union` over all
@@ -74,11 +74,11 @@ pub fn polygon_union_two(a: &[Point], b: &[Point]) -> Result<Vec<Vec<Point>>> {
 }
 
 /// Errors unless ring number `i` has at least 3 points (without a repeated closing point), all
-/// finite.
+/// in the coordinate domain.
 fn validate_ring(ring: &[Point], i: usize) -> Result<()> {
     let r = open_ring(ring);
     // The name is formatted only for an error (a merge is a few microseconds).
-    if r.len() < 3 || r.iter().any(|p| !(p.x.is_finite() && p.y.is_finite())) {
+    if r.len() < 3 || !points_in_domain(r) {
         validate_points(r, 3, &format!("ring {i}"))?;
     }
     Ok(())

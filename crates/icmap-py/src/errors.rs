@@ -1,7 +1,7 @@
 //! Mapping of [`GeomError`] to Python exceptions.
 //!
-//! ValueError: bad values (non-finite, too few points, degenerate, bad parameter, unknown class,
-//! duplicate id, corrupt file). KeyError: unknown instance id. OSError (the errno subclass, e.g.
+//! ValueError: bad values (non-finite or outside the coordinate domain, too few points,
+//! degenerate, bad parameter, unknown class, duplicate id, corrupt file). KeyError: unknown instance id. OSError (the errno subclass, e.g.
 //! FileNotFoundError, when the OS gave one): I/O failures, with the path as `filename`.
 
 use icmap_geom::GeomError;
@@ -19,6 +19,7 @@ pub fn to_py(err: GeomError) -> PyErr {
             None => PyOSError::new_err(msg),
         },
         GeomError::NonFinite { .. }
+        | GeomError::OutOfDomain { .. }
         | GeomError::TooFewPoints { .. }
         | GeomError::Degenerate { .. }
         | GeomError::UnknownClass(_)

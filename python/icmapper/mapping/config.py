@@ -66,14 +66,14 @@ class MapperConfig:
                 raise ValueError(f"MapperConfig.{name} must be in [0, 1], got {v}")
         if self.track_threshold < self.detect_threshold:
             raise ValueError("MapperConfig.track_threshold must be >= detect_threshold")
-        for name in ("positional_scale", "spacing", "smoothing", "history_points", "gate",
+        for name in ("positional_scale", "spacing", "history_points", "gate",
                      "vma_overlap", "cluster_eps", "polymerge_buffer", "city_gate"):  # fmt: skip
             if not getattr(self, name) > 0:
                 raise ValueError(f"MapperConfig.{name} must be > 0, got {getattr(self, name)}")
         for name in ("min_hits", "cluster_min_samples"):
             if getattr(self, name) < 1:
                 raise ValueError(f"MapperConfig.{name} must be >= 1, got {getattr(self, name)}")
-        for name in ("max_age", "reid_distance", "fusion_margin"):
+        for name in ("max_age", "reid_distance", "fusion_margin", "smoothing"):
             if not getattr(self, name) >= 0:
                 raise ValueError(f"MapperConfig.{name} must be >= 0, got {getattr(self, name)}")
         if not 0.0 < self.city_min_overlap <= 1.0:

@@ -32,7 +32,7 @@ pub(super) fn interpolation_knots(u: &[f64], k: usize) -> Vec<f64> {
     (0..mk1)
         .map(|i| {
             let j = k3 + 1 + i; // 0-based index of FITPACK's u(k3 + 2 + i)
-            if k % 2 == 0 {
+            if k.is_multiple_of(2) {
                 0.5 * (u[j] + u[j - 1])
             } else {
                 u[j]
