@@ -1011,11 +1011,11 @@ mod tests {
                 (i64::MIN, i64::MAX),
                 u32::MAX,
             ),
-            // Beyond 10^9 m: stored exactly in either encoding.
+            // At the edge of the coordinate domain (|x| <= 1e7 m, issue 14.3).
             inst(
                 7,
                 MapClass::Boundary,
-                vec![p(1e300, 0.0), p(-1e300, 1.0)],
+                vec![p(9.999_999e6, 0.0), p(-9.999_999e6, 1.0)],
                 (0, 1),
                 2,
             ),

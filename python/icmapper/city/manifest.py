@@ -3,7 +3,8 @@
 Layout of a city run ``CITY/``::
 
     city.json            this manifest (format "icmapper-city", version 1)
-    city.icmap           the city map (native engine file; provenance: the drives of each instance)
+    city.icmap           the city map (native file, compact: coordinates on a 0.1 mm grid;
+                         provenance: the drives of each instance)
     city.geojson         the city map in the local map frame (+ city.wgs84.geojson where located)
     city.png             the city map beside the cross-drive ground truth
     drives/<k>-<name>/   one standard run folder per drive (run.json, <name>.npz, <name>.icmap)

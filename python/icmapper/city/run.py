@@ -113,7 +113,7 @@ def build_city(
             _record(manifest, task, outcome, city, log)
             if outcome.map_bytes is not None:
                 current = outcome.map_bytes
-                GlobalMap.from_bytes(current).save(str(city_map))
+                GlobalMap.from_bytes(current).save(str(city_map), compact=True)
             write_manifest(city, manifest)
     else:
         if workers:
@@ -133,7 +133,7 @@ def build_city(
             _record(manifest, task, outcome, city, log)
         if merged is not None:
             current = merge_bytes(current, merged, gate, min_overlap) if current else merged
-            GlobalMap.from_bytes(current).save(str(city_map))
+            GlobalMap.from_bytes(current).save(str(city_map), compact=True)
         write_manifest(city, manifest)
     failed = [d for d in manifest.drives if d.status != "ok"]
     if failed:
