@@ -7,7 +7,7 @@
 //! own); every result is finite; parsing allocates no more than a small multiple of the file's
 //! size (a counting allocator, per thread).
 //!
-//! The suite runs a bounded number of cases (well under a minute in release). A longer run:
+//! The suite runs a bounded number of cases (a few seconds in release). A longer run:
 //! `ICMAP_FUZZ_CASES=100000 cargo test --release -p icmap-geom --test fuzz`.
 
 use icmap_geom::persist::{fnv1a64, from_bytes, to_bytes};
@@ -150,7 +150,7 @@ fn count() -> impl Strategy<Value = usize> {
 }
 
 proptest! {
-    #![proptest_config(ProptestConfig { cases: cases(200), ..ProptestConfig::default() })]
+    #![proptest_config(ProptestConfig { cases: cases(3000), ..ProptestConfig::default() })]
 
     /// Every entry point on arbitrary floats and counts: no panic, a deadline met, every result
     /// finite, counts beyond the caps refused.
@@ -335,7 +335,7 @@ fn parse_budget(len: usize) -> usize {
 }
 
 proptest! {
-    #![proptest_config(ProptestConfig { cases: cases(300), ..ProptestConfig::default() })]
+    #![proptest_config(ProptestConfig { cases: cases(5000), ..ProptestConfig::default() })]
 
     /// Valid files with random mutations, checksum kept wrong or resealed: parsing never panics
     /// and allocates at most a small multiple of the file's size.
