@@ -1321,6 +1321,37 @@ mod tests {
     }
 
     #[test]
+    fn a_coordinate_outside_the_domain_is_refused_on_load() {
+        // Issue 14.3: a record holding |x| > 1e7 m, with valid checksums, is not a valid map.
+        let cfg = MapConfig {
+            smoothing: 0.5,
+            spacing: 1.0,
+        };
+        let line = vec![p(1234.5, 0.0), p(1300.25, 1.0)];
+        let m = GlobalMap::from_parts(cfg, 1, vec![inst(0, MapClass::Divider, line, (0, 0), 1)])
+            .unwrap();
+        let mut b = to_bytes(&m, Encoding::Exact);
+        assert!(from_bytes(&b).is_ok());
+        let needle = 1234.5f64.to_le_bytes();
+        let rec = PREFIX + HEADER + INDEX_ENTRY + 8; // block 0's first record
+        let at = rec
+            + b[rec..]
+                .windows(8)
+                .position(|w| w == needle)
+                .expect("an exact record stores the coordinate's bits");
+        b[at..at + 8].copy_from_slice(&5e7f64.to_le_bytes());
+        // the block's box in the index (min x, min y, max x, max y) follows the record
+        let bx = PREFIX + HEADER;
+        b[bx + 16..bx + 24].copy_from_slice(&1e9f64.to_le_bytes());
+        reseal_block0(&mut b);
+        let err = from_bytes(&b).unwrap_err();
+        assert!(
+            format!("{err}").contains("outside the valid domain"),
+            "unexpected error: {err}"
+        );
+    }
+
+    #[test]
     fn absurd_headers_and_values_with_valid_checksums() {
         let bytes = to_bytes(&sample_map(), Encoding::Exact);
         let set = |off: usize, v: u64| {
