@@ -19,8 +19,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
-import tempfile
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -28,6 +26,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
+
+from icmapper.atomic import write_text_atomic
 
 if TYPE_CHECKING:
     from icmapper._icmap import GlobalMap
@@ -187,13 +187,4 @@ def geojson_wgs84(gmap: GlobalMap, frame: str) -> dict[str, Any]:
 
 def write_geojson_wgs84(gmap: GlobalMap, frame: str, path: str | Path) -> None:
     """Writes ``geojson_wgs84`` to ``path`` atomically (temp file in the folder + rename)."""
-    path = Path(path)
-    data = json.dumps(geojson_wgs84(gmap, frame))
-    fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as fh:
-            fh.write(data)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    write_text_atomic(path, json.dumps(geojson_wgs84(gmap, frame)))

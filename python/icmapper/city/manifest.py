@@ -20,10 +20,11 @@ from __future__ import annotations
 
 import json
 import os
-import tempfile
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
+
+from icmapper.atomic import write_text_atomic
 
 FORMAT = "icmapper-city"
 VERSION = 1
@@ -94,13 +95,4 @@ def read_manifest(city: str | os.PathLike) -> CityManifest:
 
 def write_manifest(city: str | os.PathLike, manifest: CityManifest) -> None:
     """Writes ``city.json`` atomically (temp file in the folder + rename)."""
-    path = Path(city) / MANIFEST
-    data = json.dumps(asdict(manifest), indent=1)
-    fd, tmp = tempfile.mkstemp(prefix=MANIFEST + ".", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as fh:
-            fh.write(data)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    write_text_atomic(Path(city) / MANIFEST, json.dumps(asdict(manifest), indent=1))

@@ -6,10 +6,10 @@ import argparse
 import json
 import math
 import os
-import tempfile
 from pathlib import Path
 from typing import Any
 
+from icmapper.atomic import atomic_open
 from icmapper.eval.tracking import DEFAULT_SCORE_THRESHOLD
 
 
@@ -32,14 +32,8 @@ def write_json(path: str | os.PathLike, results: list[dict]) -> None:
     """Writes {"format": "icmapper-eval", "version": 1, "runs": [...]} atomically."""
     path = Path(path)
     payload = {"format": "icmapper-eval", "version": 1, "runs": _clean(results)}
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent or ".")
-    try:
-        with os.fdopen(fd, "w") as fh:
-            json.dump(payload, fh, indent=1)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    with atomic_open(path) as fh:
+        json.dump(payload, fh, indent=1)
 
 
 def run(args: argparse.Namespace) -> int:

@@ -3,11 +3,10 @@
 from __future__ import annotations
 
 import json
-import os
-import tempfile
 from pathlib import Path
 from typing import Any
 
+from icmapper.atomic import atomic_open
 from icmapper.formats.types import PredictionFileError
 
 
@@ -15,14 +14,8 @@ def write_json_atomic(path: Path, data: Any) -> None:
     """Writes ``data`` as compact JSON to a temp file beside ``path``, then renames it."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as fh:
-            json.dump(data, fh, separators=(",", ":"), allow_nan=False)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    with atomic_open(path) as fh:
+        json.dump(data, fh, separators=(",", ":"), allow_nan=False)
 
 
 def field(obj: Any, key: str, kind: type | tuple[type, ...], where: str) -> Any:

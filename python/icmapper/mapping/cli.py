@@ -5,13 +5,13 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import sys
 import time
 from dataclasses import fields
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from icmapper.atomic import write_text_atomic
 from icmapper.data.sources import source_tag
 
 if TYPE_CHECKING:
@@ -123,18 +123,12 @@ def run_methods(
     for m in methods:
         writers[m].close()
         used = config if config is not None else MapperConfig()
-        _write_json_atomic(out / m / "mapper_config.json", used.to_dict())
+        write_text_atomic(out / m / "mapper_config.json", json.dumps(used.to_dict(), indent=1))
         n = sum(len(s) for s in seqs)
         (out / m / "timing.json").write_text(
             json.dumps({"frames": n, "seconds": timings[m], "ms_per_frame": 1e3 * timings[m] / n})
         )
     return run_dirs
-
-
-def _write_json_atomic(path: Path, data: Any) -> None:
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(json.dumps(data, indent=1))
-    os.replace(tmp, path)
 
 
 def range_of_detections(inp: Any) -> Any:
@@ -207,9 +201,8 @@ def cmd_compare(args: argparse.Namespace) -> int:
         report.append(text)
         write_json(sub / "results.json", results)
         all_results.extend({**r, "source": source} for r in results)
-    tmp = out / "report.md.tmp"
-    tmp.write_text(f"# icmapper compare ({args.detections} detections)\n\n" + "\n".join(report))
-    os.replace(tmp, out / "report.md")
+    title = f"# icmapper compare ({args.detections} detections)\n\n"
+    write_text_atomic(out / "report.md", title + "\n".join(report))
     write_json(out / "results.json", all_results)
     print(f"wrote {out / 'report.md'}", file=sys.stderr)
     return 0
