@@ -133,3 +133,9 @@ def test_ray_city_equals_in_process(tmp_path: Path) -> None:
     ma = GlobalMap.load(str(tmp_path / "a" / "city.icmap"))
     mb = GlobalMap.load(str(tmp_path / "b" / "city.icmap"))
     assert ma.to_bytes() == mb.to_bytes()
+
+
+def test_bad_spec_writes_nothing(tmp_path: Path) -> None:
+    with pytest.raises(ValueError, match="unknown kind"):
+        build_city(tmp_path / "c", ["nope:1"], _settings(), "60x30", log=_quiet)
+    assert not (tmp_path / "c").exists()

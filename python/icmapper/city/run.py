@@ -98,9 +98,9 @@ def build_city(
         manifest = read_manifest(city)
         _check_compatible(manifest, new, city)
     else:
-        city.mkdir(parents=True, exist_ok=True)
         manifest = new
-    tasks = _drive_tasks(city, specs, manifest, settings)
+    tasks = _drive_tasks(city, specs, manifest, settings)  # a bad spec fails before any write
+    city.mkdir(parents=True, exist_ok=True)
     city_map = city / CITY_MAP
     current = GlobalMap.load(str(city_map)).to_bytes() if city_map.is_file() else None
     log(f"city {city}: {len(tasks)} new drive(s), {len(manifest.drives)} already mapped")
