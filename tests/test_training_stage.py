@@ -106,7 +106,8 @@ def test_stage1_gradients_reach_trained_modules_only() -> None:
     net = ICMapperNet(cfg.model, cfg.perception_range)
     obj = Stage1Objective(net, cfg)
     losses = obj(_batch(cfg, clip_len=3))
-    assert set(losses) == {"loss", "det", "trans", "asso"}
+    assert set(losses) == {"loss", "det", "trans", "asso", "seg"}
+    assert float(losses["seg"]) == 0.0  # off unless stage1.seg_weight > 0
     assert all(torch.isfinite(v) for v in losses.values())
     losses["loss"].backward()
     for name, p in net.named_parameters():
@@ -114,6 +115,48 @@ def test_stage1_gradients_reach_trained_modules_only() -> None:
             assert p.grad is None, name
         else:
             assert p.grad is not None and p.grad.abs().sum() > 0, f"no gradient for {name}"
+
+
+def test_seg_head_and_neck_train() -> None:
+    """With a BEV neck and the dense segmentation target, the auxiliary loss is positive and its
+    gradient reaches the neck, the head and the view transformer (but the head is not run at
+    inference)."""
+    cfg = _cfg(model={"bev_neck": 1, "seg_head": True}, stage1={"seg_weight": 1.0})
+    torch.manual_seed(0)
+    net = ICMapperNet(cfg.model, cfg.perception_range)
+    obj = Stage1Objective(net, cfg)
+    losses = obj(_batch(cfg, clip_len=2))
+    assert float(losses["seg"]) > 0
+    losses["seg"].backward()
+    for name in ("detector.seg.net.0.weight", "detector.neck.blocks.0.0.weight",
+                 "detector.view.query"):  # fmt: skip
+        grad = dict(net.named_parameters())[name].grad
+        assert grad is not None and grad.abs().sum() > 0, name
+    net.eval()
+    b = _batch(cfg, clip_len=1)
+    with torch.no_grad():
+        out, _ = net.detector(b["images"][:, 0], b["intrinsics"][:, 0], b["cam_to_ego"][:, 0])
+    assert out.seg_logits is None
+
+
+def test_seg_weight_needs_seg_head() -> None:
+    with pytest.raises(ValueError, match="seg_head"):
+        _cfg(stage1={"seg_weight": 1.0})
+    with pytest.raises(ValueError, match="bev_neck"):
+        _cfg(model={"bev_neck": -1})
+    with pytest.raises(ValueError, match="snapshot_every"):
+        _cfg(snapshot_every=-5)
+
+
+def test_snapshots_are_inference_checkpoints(tmp_path: Path) -> None:
+    from icmapper.models.network import load_network
+
+    cfg = _cfg(snapshot_every=2)
+    train(cfg, 1, tmp_path, progress=False)
+    snaps = sorted((tmp_path / "snapshots").glob("*.pt"))
+    assert [p.name for p in snaps] == ["stage1_step000002.pt", "stage1_step000004.pt"]
+    assert load_checkpoint(snaps[0])["optimizer"] is None
+    assert load_network(snaps[-1]).step == 4
 
 
 def test_stage2_gradients_reach_fusion_only() -> None:

@@ -25,6 +25,7 @@ from __future__ import annotations
 import os
 import tempfile
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import torch
@@ -75,6 +76,25 @@ class ImageCache:
             Path(tmp).unlink(missing_ok=True)
             raise
         return arr
+
+    def fill(
+        self, sequences: list[Sequence], shard: int = 0, num_shards: int = 1, log: Any = None
+    ) -> int:
+        """Renders every frame of ``sequences`` that is not cached yet (frame j of the flat list
+        when j % num_shards == shard, so that processes can share the work); interruptible:
+        a later call goes on where it stopped. Returns the number of frames rendered."""
+        if not 0 <= shard < num_shards:
+            raise ValueError(f"shard must be in [0, {num_shards}), got {shard}")
+        todo = [(seq, i) for seq in sequences for i in range(len(seq))]
+        todo = [t for j, t in enumerate(todo) if j % num_shards == shard]
+        done = 0
+        for j, (seq, i) in enumerate(todo):
+            if not self.path(seq, i).is_file():
+                self.get(seq, i)
+                done += 1
+            if log is not None and (j + 1) % 500 == 0:
+                log(f"cache {self.root}: {j + 1}/{len(todo)} frames checked, {done} rendered")
+        return done
 
 
 def _render(seq: Sequence, i: int) -> NDArray[np.uint8]:

@@ -5,6 +5,10 @@ cell is a pillar of points at a few heights; each point is projected into every 
 intrinsics/extrinsics; the image features sampled there are combined with learned weights over
 (camera, height) (softmax over the valid projections), then projected, with a residual and an FFN.
 
+``BevNeck``: a few residual 3x3 convolutions on each frame's BEV, so that every cell sees its
+neighbours before the temporal memory and the decoder (without it the BEV is a per-cell attention
+over image samples).
+
 ``TemporalMemory``: the previous BEV warped into the current ego frame by the ego motion and fused
 with the current BEV by a convolutional GRU (StreamMapNet).
 
@@ -179,6 +183,29 @@ def warp_bev(
     norm = torch.tensor([half_x, half_y], dtype=p.dtype, device=p.device)
     p01 = (p + norm) / (2 * norm)  # (B, X, Y, 2) in [0, 1]
     return sample_bev(prev_bev, p01).permute(0, 3, 1, 2)  # (B, C, X, Y)
+
+
+class BevNeck(nn.Module):
+    """``blocks`` residual blocks (3x3 conv, GroupNorm, ReLU, 3x3 conv, GroupNorm, + input, ReLU):
+    forward(bev (B, C, X, Y)) -> (B, C, X, Y); with 0 blocks the identity."""
+
+    def __init__(self, channels: int, blocks: int) -> None:
+        super().__init__()
+        self.blocks = nn.ModuleList(
+            nn.Sequential(
+                nn.Conv2d(channels, channels, 3, padding=1, bias=False),
+                nn.GroupNorm(1, channels),
+                nn.ReLU(),
+                nn.Conv2d(channels, channels, 3, padding=1, bias=False),
+                nn.GroupNorm(1, channels),
+            )
+            for _ in range(blocks)
+        )
+
+    def forward(self, bev: torch.Tensor) -> torch.Tensor:
+        for block in self.blocks:
+            bev = F.relu(bev + block(bev))  # (B, C, X, Y)
+        return bev
 
 
 class ConvGRU(nn.Module):

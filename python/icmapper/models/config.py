@@ -32,6 +32,8 @@ class ModelConfig:
     fusion_layers: int = 3
     fusion_margin: float = 20.0  # metres around the range from which history is sampled
     fusion_history_points: int = 20  # points per sampled history instance
+    bev_neck: int = 0  # residual 3x3 conv blocks on each frame's BEV (spatial context)
+    seg_head: bool = False  # dense BEV segmentation head (auxiliary training target, MapTRv2)
 
     def __post_init__(self) -> None:
         positive = (
@@ -51,5 +53,7 @@ class ModelConfig:
             raise ValueError(
                 "model.backbone_widths and backbone_depths must have equal length >= 2"
             )
+        if self.bev_neck < 0:
+            raise ValueError(f"model.bev_neck must be >= 0, got {self.bev_neck}")
         if not self.fusion_margin >= 0:
             raise ValueError(f"model.fusion_margin must be >= 0, got {self.fusion_margin}")

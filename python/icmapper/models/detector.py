@@ -14,10 +14,11 @@ from torch import nn
 
 from icmapper.data.types import PerceptionRange, RANGE_60x30
 from icmapper.models.backbone import ResNetBackbone
-from icmapper.models.bev import TemporalMemory, ViewTransformer
+from icmapper.models.bev import BevNeck, TemporalMemory, ViewTransformer
 from icmapper.models.config import ModelConfig
 from icmapper.models.decoder import MapDecoder
 from icmapper.models.propagation import QueryPropagation, select_topk
+from icmapper.models.segmentation import SegHead
 
 
 @dataclass
@@ -47,6 +48,8 @@ class DetectorOutput:
     last layer; bev (B, C, X, Y). When queries were propagated: num_propagated = k (they occupy
     slots 0..k-1), prop_src (B, k) their slots in the previous frame, trans_points (B, k, P, 2)
     in [0, 1] the points regressed from the U_MLP output (for L_trans); else k = 0 and None.
+    seg_logits (B, K, X, Y): the dense BEV segmentation of a model with ``seg_head`` (training's
+    auxiliary target; computed in training mode only), else None.
     """
 
     logits: list[torch.Tensor]
@@ -56,6 +59,7 @@ class DetectorOutput:
     num_propagated: int = 0
     prop_src: torch.Tensor | None = None
     trans_points: torch.Tensor | None = None
+    seg_logits: torch.Tensor | None = None
 
     def scores(self) -> torch.Tensor:
         """(B, Q) max class probability of the last layer."""
@@ -81,7 +85,9 @@ class MapDetector(nn.Module):
         self.view = ViewTransformer(
             s.channels, s.channels, s.bev_x, s.bev_y, hx, hy, s.heights, s.num_cameras
         )
+        self.neck = BevNeck(s.channels, s.bev_neck)
         self.memory = TemporalMemory(s.channels, hx, hy)
+        self.seg = SegHead(s.channels, s.num_classes) if s.seg_head else None
         self.decoder = MapDecoder(
             s.channels,
             s.num_queries,
@@ -128,7 +134,7 @@ class MapDetector(nn.Module):
         prev_to_cur: torch.Tensor | None,
     ) -> torch.Tensor:
         """BEV (B, C, X, Y) of this frame fused with the warped previous BEV."""
-        bev = self.view(feats, intrinsics, cam_to_ego, image_size)  # (B, C, X, Y)
+        bev = self.neck(self.view(feats, intrinsics, cam_to_ego, image_size))  # (B, C, X, Y)
         if not self.cfg.temporal or state is None or prev_to_cur is None:
             return self.memory(bev, None, None)
         cur_to_prev = torch.linalg.inv(prev_to_cur.float())  # (B, 4, 4)
@@ -161,7 +167,8 @@ class MapDetector(nn.Module):
             trans = self.decoder.refine(self.decoder.num_layers_ - 1, prop_q, prop_p)  # (B,k,P,2)
             src, k = state.src_index, int(state.queries.shape[1])
         dec = self.decoder(bev, prop_q, prop_p)
-        out = DetectorOutput(dec.logits, dec.points, dec.queries, bev, k, src, trans)
+        seg = self.seg(bev) if self.seg is not None and self.training else None  # (B,K,X,Y)
+        out = DetectorOutput(dec.logits, dec.points, dec.queries, bev, k, src, trans, seg)
         return out, self.next_state(out)
 
     def next_state(self, out: DetectorOutput) -> DetectorState:

@@ -29,6 +29,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--max-steps", type=int, default=None, help="stop after N steps in all")
     p.add_argument("--init", type=Path, default=None, help="stage 2: stage-1 checkpoint")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument(
+        "--fill-cache",
+        metavar="I/N",
+        default=None,
+        help="only render the frames of data.source into data.cache_dir (shard I of N, e.g. "
+        "0/2 and 1/2 in two processes) and exit; interruptible, a later call goes on",
+    )
     p.set_defaults(func=run)
 
 
@@ -42,6 +49,8 @@ def run(args: argparse.Namespace) -> int:
     from icmapper.settings import parse_assignments
 
     cfg = load_config(args.config, parse_assignments(args.set or []))
+    if args.fill_cache is not None:
+        return fill_cache(cfg, args.fill_cache)
     info = init_distributed()
     try:
         result = train(
@@ -60,4 +69,28 @@ def run(args: argparse.Namespace) -> int:
         print(f"stage {args.stage}: {result['step']} steps; checkpoint {result['checkpoint']}")
         if result["losses"]:
             print("last losses: " + ", ".join(f"{k}={v:.4f}" for k, v in result["losses"].items()))
+    return 0
+
+
+def fill_cache(cfg: object, shard_spec: str) -> int:
+    """``--fill-cache I/N``: renders data.source's frames into data.cache_dir."""
+    from icmapper.data.datasets import ImageCache
+    from icmapper.data.sources import open_source
+    from icmapper.training.config import TrainConfig
+
+    assert isinstance(cfg, TrainConfig)
+    try:
+        shard, num = (int(v) for v in shard_spec.split("/"))
+    except ValueError:
+        raise ValueError(f"--fill-cache must be I/N (e.g. 0/2), got {shard_spec!r}") from None
+    if not cfg.data.cache_dir:
+        raise ValueError("--fill-cache needs data.cache_dir in the config (or --set)")
+    seqs = open_source(
+        cfg.data.source,
+        image_size=tuple(cfg.data.image_size),
+        seed=cfg.seed,
+        split_file=cfg.data.split_file or None,
+    )
+    n = ImageCache(cfg.data.cache_dir).fill(list(seqs), shard, num, log=print)
+    print(f"cache {cfg.data.cache_dir}: {n} frames rendered (shard {shard}/{num})")
     return 0

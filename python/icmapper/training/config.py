@@ -49,6 +49,8 @@ class Stage1Config:
     cls_weight: float = 2.0
     pts_weight: float = 5.0
     detach_state: bool = True
+    #: weight of the dense BEV segmentation loss (needs model.seg_head; 0: off)
+    seg_weight: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -74,6 +76,9 @@ class TrainConfig:
     amp: bool = True
     log_every: int = 10
     ckpt_every: int = 200
+    #: every N steps also keep an inference-only copy OUT/snapshots/stage{n}_step{N:06d}.pt, for
+    #: learning curves (``python -m icmapper.training.curves``); 0: none
+    snapshot_every: int = 0
     score_threshold: float = 0.1
     model: ModelConfig = field(default_factory=ModelConfig)
     data: DataConfig = field(default_factory=DataConfig)
@@ -113,6 +118,12 @@ def _validate(cfg: TrainConfig) -> None:
     }.items():
         if not 0.0 <= v <= 1.0:
             raise ValueError(f"config key {key} must be in [0, 1], got {v}")
+    if cfg.snapshot_every < 0:
+        raise ValueError(f"config key snapshot_every must be >= 0, got {cfg.snapshot_every}")
+    if s1.seg_weight < 0:
+        raise ValueError(f"config key stage1.seg_weight must be >= 0, got {s1.seg_weight}")
+    if s1.seg_weight > 0 and not cfg.model.seg_head:
+        raise ValueError("config key stage1.seg_weight > 0 needs model.seg_head = true")
     if s1.steps < 0 or s2.steps < 0 or s1.warmup_steps < 0 or s2.warmup_steps < 0:
         raise ValueError("steps and warmup_steps must be >= 0")
 

@@ -2,8 +2,9 @@
 
 ``train(cfg, stage, out_dir, ...)`` runs stage 1 (detector + association on clips) or stage 2
 (fusion on long clips / sequences, detector and association frozen, learning rate x lr_scale).
-Checkpoints: ``OUT/stage{n}.pt`` (latest; resumable). Logs: ``OUT/stage{n}_metrics.csv`` and,
-when the ``tensorboard`` package is installed, ``OUT/tb``.
+Checkpoints: ``OUT/stage{n}.pt`` (latest; resumable) and, with ``snapshot_every``, inference-only
+snapshots ``OUT/snapshots/stage{n}_step{N}.pt`` (learning curves). Logs:
+``OUT/stage{n}_metrics.csv`` and, when the ``tensorboard`` package is installed, ``OUT/tb``.
 """
 
 from __future__ import annotations
@@ -290,6 +291,15 @@ def train(
                     config=config_to_dict(cfg),
                 )
             barrier()
+        if cfg.snapshot_every and done % cfg.snapshot_every == 0 and info.is_main:
+            save_checkpoint(
+                out / "snapshots" / f"stage{stage}_step{done:06d}.pt",
+                model=net.state_dict(),
+                optimizer=None,
+                stage=stage,
+                step=done,
+                config=config_to_dict(cfg),
+            )
         step = done
     if bar is not None:
         bar.close()

@@ -28,6 +28,7 @@ from icmapper.models.losses import (
 )
 from icmapper.models.network import ICMapperNet
 from icmapper.models.propagation import select_topk, transform_points
+from icmapper.models.segmentation import rasterise, seg_loss
 from icmapper.training.config import TrainConfig
 
 
@@ -65,7 +66,8 @@ def check_batch(batch: dict) -> None:
 
 
 class Stage1Objective(nn.Module):
-    """forward(batch) -> {'loss', 'det', 'trans', 'asso'} averaged over the clip's frames."""
+    """forward(batch) -> {'loss', 'det', 'trans', 'asso', 'seg'} averaged over the clip's frames
+    ('seg': the dense BEV segmentation loss, 0 unless ``stage1.seg_weight`` > 0)."""
 
     def __init__(self, net: ICMapperNet, cfg: TrainConfig) -> None:
         super().__init__()
@@ -74,7 +76,17 @@ class Stage1Objective(nn.Module):
         self.association = net.association
         self.criterion = DetectionCriterion(cfg.model.num_classes, s.cls_weight, s.pts_weight)
         self.alpha, self.beta = s.alpha_trans, s.beta_asso
+        self.seg_weight = s.seg_weight
         self.detach_state = s.detach_state
+
+    def seg_targets(self, gts: list[dict], out: DetectorOutput) -> torch.Tensor:
+        """Rasterised GT of one frame (B, K, X, Y) on the BEV grid of ``out.seg_logits``."""
+        det = self.detector
+        _, k, nx, ny = out.seg_logits.shape  # type: ignore[union-attr]
+        r = det.rng
+        return torch.stack(
+            [rasterise(g["points"], g["classes"], nx, ny, r.half_x, r.half_y, k) for g in gts]
+        )
 
     def association_pairs(
         self,
@@ -113,7 +125,7 @@ class Stage1Objective(nn.Module):
         prev: DetectorOutput | None = None
         prev_matches: list[FrameMatch] | None = None
         zero = batch["images"].new_zeros((), dtype=torch.float32)
-        l_det, l_trans, l_asso = zero, zero, zero
+        l_det, l_trans, l_asso, l_seg = zero, zero, zero, zero
         n_asso = 0
         for t in range(t_len):
             motion = prev_to_cur(batch["poses"], t) if t > 0 else None
@@ -127,6 +139,8 @@ class Stage1Objective(nn.Module):
             gts = [prepare_gt(g[t], self.detector, dev) for g in batch["gt"]]
             det_loss, matches = self.criterion(out.logits, out.points, gts)
             l_det = l_det + det_loss
+            if self.seg_weight > 0 and out.seg_logits is not None:
+                l_seg = l_seg + seg_loss(out.seg_logits, self.seg_targets(gts, out))
             if out.trans_points is not None and out.prop_src is not None and prev_matches:
                 l_trans = l_trans + trans_loss(out.trans_points, out.prop_src, prev_matches, gts)
             if prev is not None and prev_matches is not None and motion is not None:
@@ -141,8 +155,9 @@ class Stage1Objective(nn.Module):
         l_det = l_det / t_len
         l_trans = l_trans / max(1, t_len - 1)
         l_asso = l_asso / max(1, n_asso)
-        total = l_det + self.alpha * l_trans + self.beta * l_asso
-        return {"loss": total, "det": l_det, "trans": l_trans, "asso": l_asso}
+        l_seg = l_seg / t_len
+        total = l_det + self.alpha * l_trans + self.beta * l_asso + self.seg_weight * l_seg
+        return {"loss": total, "det": l_det, "trans": l_trans, "asso": l_asso, "seg": l_seg}
 
 
 class Stage2Objective(nn.Module):

@@ -1,0 +1,183 @@
+"""Why is the detector weak? Two upper bounds, measured with the project's own detection eval.
+
+``perfect-bev``: the decoder (same ``MapDecoder``, matcher and loss as the detector) fed a perfect
+BEV: the rasterised ground truth (``models.segmentation.rasterise``) lifted to the BEV channels by
+two convolutions. What it reaches bounds what any view transformer could give this decoder.
+
+``seg-iou``: the intersection over union per class of a checkpoint's dense BEV segmentation head
+(``model.seg_head``) on the validation drives: how much of the map the BEV features hold, read by
+a dense head instead of the set decoder.
+
+``python -m icmapper.training.diagnostics perfect-bev --config configs/small.toml --steps 3000``
+``python -m icmapper.training.diagnostics seg-iou CHECKPOINT --source sim:val:4``
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+from torch import nn
+
+from icmapper.data.types import CLASS_NAMES, PerceptionRange
+from icmapper.models.config import ModelConfig
+from icmapper.models.decoder import MapDecoder
+from icmapper.models.losses import DetectionCriterion
+from icmapper.models.segmentation import rasterise
+
+
+class PerfectBev(nn.Module):
+    """forward(masks (B, K, X, Y)) -> DecoderOutput: rasterised GT -> BEV (B, C, X, Y) ->
+    the detector's decoder."""
+
+    def __init__(self, cfg: ModelConfig) -> None:
+        super().__init__()
+        c = cfg.channels
+        self.lift = nn.Sequential(
+            nn.Conv2d(cfg.num_classes, c, 3, padding=1), nn.ReLU(),
+            nn.Conv2d(c, c, 3, padding=1), nn.GroupNorm(1, c),
+        )  # fmt: skip
+        self.pos = nn.Parameter(torch.randn(1, c, cfg.bev_x, cfg.bev_y) * 0.02)  # (1, C, X, Y)
+        self.decoder = MapDecoder(
+            c, cfg.num_queries, cfg.num_layers, cfg.num_points, cfg.num_classes, cfg.heads,
+            cfg.shared_reg,
+        )  # fmt: skip
+
+    def forward(self, masks: torch.Tensor):  # noqa: ANN201 - DecoderOutput
+        return self.decoder(self.lift(masks) + self.pos)
+
+
+def _frames(spec: str, rng: PerceptionRange, seed: int) -> list[list]:
+    """Per-sequence lists of FrameGT of a source (no images)."""
+    from icmapper.data.gt import sequence_gt
+    from icmapper.data.sources import open_source
+
+    return [sequence_gt(s, rng) for s in open_source(spec, seed=seed, render=False)]
+
+
+def _masks(frames: list, cfg: ModelConfig, rng: PerceptionRange) -> torch.Tensor:
+    """(B, K, X, Y) rasterised GT of FrameGTs."""
+    return torch.stack([
+        rasterise(torch.as_tensor(np.asarray(g.points, np.float32).reshape(-1, 20, 2)),
+                  torch.as_tensor(np.asarray(g.classes, np.int64)), cfg.bev_x, cfg.bev_y,
+                  rng.half_x, rng.half_y, cfg.num_classes)
+        for g in frames
+    ])  # fmt: skip
+
+
+def _targets(frames: list, rng: PerceptionRange) -> list[dict]:
+    half = torch.tensor([rng.half_x, rng.half_y])
+    out = []
+    for g in frames:
+        pts = torch.as_tensor(np.asarray(g.points, np.float32).reshape(-1, 20, 2))
+        out.append({"classes": torch.as_tensor(np.asarray(g.classes, np.int64)),
+                    "points01": (pts / half + 1) / 2, "ids": torch.as_tensor(g.ids)})  # fmt: skip
+    return out
+
+
+def perfect_bev(config: Path, steps: int, train_spec: str, val_spec: str, batch: int,
+                log: bool = True) -> dict:  # fmt: skip
+    """Trains ``PerfectBev`` for ``steps`` and returns the detection result on ``val_spec``."""
+    from icmapper.eval.evaluate import evaluate
+    from icmapper.eval.runfmt import FramePredictions
+    from icmapper.training.config import load_config
+
+    cfg = load_config(config)
+    rng = cfg.perception_range
+    torch.manual_seed(cfg.seed)
+    train = [g for seq in _frames(train_spec, rng, cfg.seed) for g in seq]
+    net = PerfectBev(cfg.model)
+    crit = DetectionCriterion(cfg.model.num_classes, cfg.stage1.cls_weight, cfg.stage1.pts_weight)
+    opt = torch.optim.AdamW(net.parameters(), lr=cfg.stage1.lr, weight_decay=0.01)
+    gen = np.random.default_rng(cfg.seed)
+    t0 = time.perf_counter()
+    for step in range(steps):
+        pick = [train[i] for i in gen.integers(len(train), size=batch)]
+        out = net(_masks(pick, cfg.model, rng))
+        loss, _ = crit(out.logits, out.points, _targets(pick, rng))
+        opt.zero_grad()
+        loss.backward()
+        torch.nn.utils.clip_grad_norm_(net.parameters(), cfg.stage1.grad_clip)
+        opt.step()
+        if log and (step + 1) % 200 == 0:
+            print(f"step {step + 1}: det loss {float(loss):.3f} "
+                  f"({time.perf_counter() - t0:.0f} s)", flush=True)  # fmt: skip
+    net.eval()
+    val = _frames(val_spec, rng, cfg.seed)
+    half = np.array([rng.half_x, rng.half_y], np.float32)
+    preds = []
+    with torch.no_grad():
+        for seq in val:
+            out = net(_masks(seq, cfg.model, rng))
+            prob = out.logits[-1].sigmoid()  # (T, Q, K)
+            pts = (out.points[-1].numpy() * 2 - 1) * half  # (T, Q, P, 2) metres
+            q = prob.shape[1]
+            preds.append([
+                FramePredictions(t, np.eye(4), prob[t].argmax(-1).numpy().astype(np.int64),
+                                 prob[t].max(-1).values.numpy().astype(np.float64),
+                                 pts[t].astype(np.float32), np.arange(q, dtype=np.int64))
+                for t in range(len(seq))
+            ])  # fmt: skip
+    return evaluate(preds, val, range_name=rng.name)["detection"]
+
+
+def seg_iou(checkpoint: Path, spec: str) -> dict[str, float]:
+    """IoU (%) per class of a checkpoint's segmentation head (threshold 0.5) on ``spec``."""
+    from icmapper.data.datasets import SequenceDataset
+    from icmapper.data.sources import open_source
+    from icmapper.models.network import load_network
+    from icmapper.training.objectives import prev_to_cur
+
+    loaded = load_network(checkpoint)
+    det, cfg, rng = loaded.net.detector, loaded.model, loaded.rng
+    if det.seg is None:
+        raise ValueError(f"checkpoint {checkpoint} has no segmentation head (model.seg_head)")
+    ds = SequenceDataset(open_source(spec, image_size=loaded.image_size), rng)
+    inter = np.zeros(cfg.num_classes)
+    union = np.zeros(cfg.num_classes)
+    with torch.no_grad():
+        for i in range(len(ds)):
+            item = ds[i]
+            state = None
+            poses = item["poses"][None]  # (1, T, 4, 4)
+            for t in range(item["images"].shape[0]):
+                motion = prev_to_cur(poses, t) if t > 0 else None
+                out, state = det(item["images"][None, t], item["intrinsics"][None, t],
+                                 item["cam_to_ego"][None, t], state, motion)  # fmt: skip
+                pred = (det.seg(out.bev)[0] > 0).numpy()  # (K, X, Y)
+                g = item["gt"][t]
+                tgt = rasterise(g["points"], g["classes"], cfg.bev_x, cfg.bev_y, rng.half_x,
+                                rng.half_y, cfg.num_classes).numpy() > 0.5  # fmt: skip
+                inter += (pred & tgt).reshape(cfg.num_classes, -1).sum(1)
+                union += (pred | tgt).reshape(cfg.num_classes, -1).sum(1)
+    return {n: 100 * float(inter[k] / max(union[k], 1)) for k, n in enumerate(CLASS_NAMES)}
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m icmapper.training.diagnostics",
+                                 description=__doc__)  # fmt: skip
+    sub = ap.add_subparsers(dest="what", required=True)
+    p = sub.add_parser("perfect-bev", help="the decoder on a rasterised-GT BEV")
+    p.add_argument("--config", type=Path, default=Path("configs/small.toml"))
+    p.add_argument("--steps", type=int, default=3000)
+    p.add_argument("--batch", type=int, default=6)
+    p.add_argument("--train", default="sim:train:128")
+    p.add_argument("--val", default="sim:val:4")
+    s = sub.add_parser("seg-iou", help="IoU of a checkpoint's segmentation head")
+    s.add_argument("checkpoint", type=Path)
+    s.add_argument("--source", default="sim:val:4")
+    args = ap.parse_args(argv)
+    if args.what == "perfect-bev":
+        det = perfect_bev(args.config, args.steps, args.train, args.val, args.batch)
+        print(json.dumps({"AP_class": det["AP_class"], "mAP": det["mAP"]}, indent=1))
+    else:
+        print(json.dumps(seg_iou(args.checkpoint, args.source), indent=1))
+    return 0
+
+
+if __name__ == "__main__":  # pragma: no cover
+    raise SystemExit(main())
