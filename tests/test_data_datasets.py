@@ -106,6 +106,18 @@ def test_image_cache(tmp_path: Path) -> None:
     assert torch.equal(ds[0]["images"], first) and seq.render.calls == 4
 
 
+def test_image_cache_fill_in_shards(tmp_path: Path) -> None:
+    seqs = [_seq("a", 3), _seq("b", 4)]
+    cache = ImageCache(tmp_path)
+    assert cache.fill(seqs, 1, 2) == 3  # frames 1, 3, 5 of the flat list of 7
+    assert cache.fill(seqs, 0, 2) == 4
+    assert cache.fill(seqs, 0, 1) == 0  # nothing left: an interrupted fill goes on from here
+    assert sum(s.render.calls for s in seqs) == 7
+    assert len(list(tmp_path.rglob("*.npy"))) == 7
+    with pytest.raises(ValueError, match="shard"):
+        cache.fill(seqs, 2, 2)
+
+
 def test_collate() -> None:
     ds = ClipDataset([_seq("a", 4)], clip_len=2)
     batch = collate_clips([ds[0], ds[1]])

@@ -83,3 +83,19 @@ def test_perfect_bev_decoder_learns(tmp_path: Path) -> None:
     untrained = diagnostics.perfect_bev(cfg, 0, "sim:val:1", "sim:val:1", 4, log=False)
     trained = diagnostics.perfect_bev(cfg, 150, "sim:val:1", "sim:val:1", 4, log=False)
     assert trained["mAP"] > untrained["mAP"] + 0.02
+
+
+def test_train_fill_cache_cli(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    from icmapper.cli import main
+
+    repo = Path(__file__).resolve().parents[1]
+    base = ["train", "--config", str(repo / "configs" / "small.toml"),
+            "--set", 'data.source="sim:val:1"', "--set", "data.image_size=[32,64]"]  # fmt: skip
+    cache = tmp_path / "cache"
+    assert main([*base, "--set", f'data.cache_dir="{cache}"', "--fill-cache", "0/1"]) == 0
+    frames = list(cache.rglob("*.npy"))
+    assert len(frames) > 10 and np.load(frames[0]).shape == (6, 3, 32, 64)
+    assert main([*base, "--set", f'data.cache_dir="{cache}"', "--fill-cache", "x"]) != 0
+    assert "--fill-cache must be I/N" in capsys.readouterr().err
+    assert main([*base, "--set", 'data.cache_dir=""', "--fill-cache", "0/1"]) != 0
+    assert "needs data.cache_dir" in capsys.readouterr().err
