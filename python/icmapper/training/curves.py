@@ -13,7 +13,9 @@ beside a training run and be called again as snapshots appear.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import csv
+import io
 import json
 import re
 import tempfile
@@ -40,7 +42,7 @@ def evaluate_snapshot(path: Path, source: str) -> dict[str, float]:
     """Detection AP (in %) per class and mAP of one checkpoint on ``source``."""
     from icmapper.cli import main
 
-    with tempfile.TemporaryDirectory() as tmp:
+    with tempfile.TemporaryDirectory() as tmp, contextlib.redirect_stdout(io.StringIO()):
         argv = ["compare", "--source", source, "--methods", "icmapper-base",
                 "--checkpoint", str(path), "--out", tmp, "--no-progress"]  # fmt: skip
         if main(argv) != 0:

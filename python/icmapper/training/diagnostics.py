@@ -104,7 +104,7 @@ def perfect_bev(config: Path, steps: int, train_spec: str, val_spec: str, batch:
         torch.nn.utils.clip_grad_norm_(net.parameters(), cfg.stage1.grad_clip)
         opt.step()
         if log and (step + 1) % 200 == 0:
-            print(f"step {step + 1}: det loss {float(loss):.3f} "
+            print(f"step {step + 1}: det loss {float(loss.detach()):.3f} "
                   f"({time.perf_counter() - t0:.0f} s)", flush=True)  # fmt: skip
     net.eval()
     val = _frames(val_spec, rng, cfg.seed)
