@@ -77,3 +77,42 @@ def test_matcher_empty_gt_and_nan() -> None:
     bad[0, 0, 0] = float("nan")
     with pytest.raises(ValueError, match="NaN"):
         m(torch.randn(3, 3), bad, torch.tensor([1]), torch.rand(1, 20, 2))
+
+
+def _brute_force_capacity(cost: torch.Tensor, capacity: int) -> float:
+    """Minimal total cost of assigning distinct predictions to GT instances, each instance taking
+    up to ``capacity`` predictions and min(Q, capacity * G) pairs in all (enumerated directly on
+    the (Q, G) cost, not on repeated columns)."""
+    q, g = cost.shape
+    pairs = min(q, capacity * g)
+    best = float("inf")
+    for labels in itertools.product(range(-1, g), repeat=q):  # -1: prediction unmatched
+        used = [labels.count(c) for c in range(g)]
+        if max(used) > capacity or sum(used) != pairs:
+            continue
+        best = min(best, sum(float(cost[r, c]) for r, c in enumerate(labels) if c >= 0))
+    return best
+
+
+@pytest.mark.parametrize("q,g,k,seed", [(5, 2, 2, 0), (6, 3, 2, 1), (4, 3, 3, 2), (7, 2, 3, 3)])
+def test_one_to_many_matching_matches_brute_force(q: int, g: int, k: int, seed: int) -> None:
+    """Hungarian matching against the GT repeated k times (losses.repeat_targets) is the optimal
+    assignment in which every GT instance takes up to k predictions."""
+    from icmapper.models.losses import repeat_targets
+
+    gen = torch.Generator().manual_seed(seed)
+    logits = torch.randn(q, 3, generator=gen)
+    points = torch.rand(q, 20, 2, generator=gen)
+    gt = {"classes": torch.randint(0, 3, (g,), generator=gen),
+          "points01": torch.rand(g, 20, 2, generator=gen), "ids": torch.arange(g)}  # fmt: skip
+    rep = repeat_targets(gt, k)
+    assert rep["points01"].shape == (k * g, 20, 2) and torch.equal(rep["ids"] % g, rep["ids"])
+    m = HungarianMatcher()
+    pi, gi, _ = m(logits, points, rep["classes"], rep["points01"])
+    counts = torch.bincount(rep["ids"][gi], minlength=g)
+    assert int(counts.max()) <= k and len(set(pi.tolist())) == len(pi)
+    cost, _ = m.cost_matrix(logits, points, gt["classes"], gt["points01"])  # (Q, G)
+    total = float(cost[pi, rep["ids"][gi]].sum())
+    assert total == pytest.approx(_brute_force_capacity(cost, k), rel=1e-5, abs=1e-5)
+    with pytest.raises(ValueError, match="repeats"):
+        repeat_targets(gt, 0)

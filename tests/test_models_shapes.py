@@ -140,3 +140,29 @@ def test_fusion_pass_through_and_shapes() -> None:
     with pytest.raises(ValueError):
         fus(torch.rand(4, 19, 2), torch.zeros(4, dtype=torch.int64), hist, has)
     assert math.isfinite(float(outs[-1].detach().sum()))
+
+
+def test_one_to_many_queries_train_only_and_isolated() -> None:
+    """The one-to-many queries run in training only, in their own attention group: the main
+    queries' outputs are the same with and without them (same weights)."""
+    from icmapper.models.decoder import MapDecoder
+
+    torch.manual_seed(0)
+    plain = MapDecoder(32, 6, 2, num_points=20, heads=4)
+    hybrid = MapDecoder(32, 6, 2, num_points=20, heads=4, aux_queries=4)
+    state = plain.state_dict()
+    with torch.no_grad():
+        for name, p in hybrid.named_parameters():
+            src = state[name]
+            p.copy_(torch.cat([src, p[src.shape[0] :]]) if name in ("query", "ref") else src)
+    bev = torch.randn(2, 32, 10, 8)
+    prop_q, prop_p = torch.randn(2, 2, 32), torch.rand(2, 2, 20, 2)
+    plain.train(), hybrid.train()
+    a, b = plain(bev, prop_q, prop_p), hybrid(bev, prop_q, prop_p)
+    assert b.aux_logits is not None and b.aux_points is not None and a.aux_logits is None
+    assert b.aux_logits[-1].shape == (2, 4, 3) and b.aux_points[-1].shape == (2, 4, 20, 2)
+    for x, y in zip(a.logits + a.points, b.logits + b.points, strict=True):
+        assert torch.allclose(x, y, atol=1e-5)
+    hybrid.eval()
+    c = hybrid(bev, prop_q, prop_p)
+    assert c.aux_logits is None and c.logits[-1].shape == (2, 6, 3)

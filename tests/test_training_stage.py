@@ -139,6 +139,20 @@ def test_seg_head_and_neck_train() -> None:
     assert out.seg_logits is None
 
 
+def test_one_to_many_loss_trains_the_aux_queries() -> None:
+    cfg = _cfg(model={"aux_queries": 5}, stage1={"one_to_many_repeats": 2})
+    torch.manual_seed(0)
+    net = ICMapperNet(cfg.model, cfg.perception_range)
+    losses = Stage1Objective(net, cfg)(_batch(cfg, clip_len=2))
+    assert float(losses["o2m"]) > 0
+    losses["o2m"].backward()
+    grad = net.detector.decoder.query.grad  # (Q + A, C)
+    assert grad is not None and grad[cfg.model.num_queries :].abs().sum() > 0
+    assert grad[: cfg.model.num_queries].abs().sum() == 0  # main queries: not from this loss
+    with pytest.raises(ValueError, match="one_to_many"):
+        _cfg(stage1={"one_to_many_repeats": 0})
+
+
 def test_seg_weight_needs_seg_head() -> None:
     with pytest.raises(ValueError, match="seg_head"):
         _cfg(stage1={"seg_weight": 1.0})

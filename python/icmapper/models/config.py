@@ -34,6 +34,8 @@ class ModelConfig:
     fusion_history_points: int = 20  # points per sampled history instance
     bev_neck: int = 0  # residual 3x3 conv blocks on each frame's BEV (spatial context)
     seg_head: bool = False  # dense BEV segmentation head (auxiliary training target, MapTRv2)
+    #: extra decoder queries for one-to-many matching (MapTRv2's hybrid matching; training only)
+    aux_queries: int = 0
 
     def __post_init__(self) -> None:
         positive = (
@@ -53,6 +55,8 @@ class ModelConfig:
             raise ValueError(
                 "model.backbone_widths and backbone_depths must have equal length >= 2"
             )
+        if self.aux_queries < 0:
+            raise ValueError(f"model.aux_queries must be >= 0, got {self.aux_queries}")
         if self.bev_neck < 0:
             raise ValueError(f"model.bev_neck must be >= 0, got {self.bev_neck}")
         if not self.fusion_margin >= 0:

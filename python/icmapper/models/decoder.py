@@ -4,6 +4,13 @@ Each layer: self-attention among queries; the query samples the BEV at its curre
 and aggregates them with learned per-point weights; an FFN; then a class head (logits per layer) and
 a regression head (shared by all layers or one per layer) that refines the points in inverse-sigmoid
 space. Points are normalised to [0, 1] of the perception range inside the decoder.
+
+One-to-many matching (MapTRv2's hybrid matching): with ``aux_queries`` A > 0 the decoder holds A
+extra queries that run beside the Q main ones in training only, in their own self-attention group
+(a mask keeps the groups apart, so the main queries behave as without them); their outputs
+(``DecoderOutput.aux_logits`` / ``aux_points``) are matched to the ground truth repeated several
+times (``losses.DetectionCriterion`` with repeated targets), giving the decoder many more positive
+samples per frame. Inference runs the Q main queries only.
 """
 
 from __future__ import annotations
@@ -36,11 +43,14 @@ def mlp(c_in: int, c_hidden: int, c_out: int, layers: int = 2) -> nn.Sequential:
 @dataclass
 class DecoderOutput:
     """logits: per layer (B, Q, K); points: per layer (B, Q, P, 2) in [0, 1]; queries (B, Q, C)
-    of the last layer."""
+    of the last layer; aux_logits / aux_points: the same for the A one-to-many queries (training
+    with ``aux_queries`` > 0), else None."""
 
     logits: list[torch.Tensor]
     points: list[torch.Tensor]
     queries: torch.Tensor
+    aux_logits: list[torch.Tensor] | None = None
+    aux_points: list[torch.Tensor] | None = None
 
 
 class DecoderLayer(nn.Module):
@@ -58,11 +68,18 @@ class DecoderLayer(nn.Module):
         self.norm3 = nn.LayerNorm(channels)
 
     def forward(
-        self, q: torch.Tensor, pos: torch.Tensor, bev: torch.Tensor, points: torch.Tensor
+        self,
+        q: torch.Tensor,
+        pos: torch.Tensor,
+        bev: torch.Tensor,
+        points: torch.Tensor,
+        attn_mask: torch.Tensor | None = None,
     ) -> torch.Tensor:
-        """q, pos (B, Q, C); bev (B, C, X, Y); points (B, Q, P, 2) in [0, 1] -> (B, Q, C)."""
+        """q, pos (B, Q, C); bev (B, C, X, Y); points (B, Q, P, 2) in [0, 1]; attn_mask (Q, Q)
+        bool, True where a query may not attend -> (B, Q, C)."""
         qp = q + pos
-        q = self.norm1(q + self.self_attn(qp, qp, q, need_weights=False)[0])  # (B, Q, C)
+        att = self.self_attn(qp, qp, q, need_weights=False, attn_mask=attn_mask)[0]
+        q = self.norm1(q + att)  # (B, Q, C)
         feats = self.value(sample_bev(bev, points))  # (B, Q, P, C)
         w = torch.softmax(self.point_weights(q + pos), dim=-1)  # (B, Q, P)
         agg = torch.einsum("bqp,bqpc->bqc", w, feats)  # (B, Q, C)
@@ -84,12 +101,15 @@ class MapDecoder(nn.Module):
         num_classes: int = 3,
         heads: int = 4,
         shared_reg: bool = True,
+        aux_queries: int = 0,
     ) -> None:
         super().__init__()
         self.num_queries, self.num_points, self.num_classes = num_queries, num_points, num_classes
         self.num_layers_ = num_layers
-        self.query = nn.Parameter(torch.randn(num_queries, channels) * 0.02)  # (Q, C)
-        self.ref = nn.Parameter(torch.randn(num_queries, num_points, 2) * 0.5)  # logits of points
+        self.aux_queries = aux_queries
+        total = num_queries + aux_queries
+        self.query = nn.Parameter(torch.randn(total, channels) * 0.02)  # (Q + A, C)
+        self.ref = nn.Parameter(torch.randn(total, num_points, 2) * 0.5)  # logits of points
         self.layers = nn.ModuleList(
             [DecoderLayer(channels, num_points, heads) for _ in range(num_layers)]
         )
@@ -126,21 +146,35 @@ class MapDecoder(nn.Module):
         prop_queries: torch.Tensor | None = None,
         prop_points: torch.Tensor | None = None,
     ) -> DecoderOutput:
-        b = bev.shape[0]
-        q = self.query[None].expand(b, -1, -1)  # (B, Q, C)
-        points = torch.sigmoid(self.ref)[None].expand(b, -1, -1, -1)  # (B, Q, P, 2)
+        b, nq = bev.shape[0], self.num_queries
+        aux = self.aux_queries if self.training else 0
+        q = self.query[None, : nq + aux].expand(b, -1, -1)  # (B, Q + A, C)
+        points = torch.sigmoid(self.ref[: nq + aux])[None].expand(b, -1, -1, -1)  # (B, Q+A, P, 2)
         if prop_queries is not None and prop_points is not None:
             k = prop_queries.shape[1]
-            if k > self.num_queries:
-                raise ValueError(f"{k} propagated queries exceed {self.num_queries} queries")
-            q = torch.cat([prop_queries, q[:, : self.num_queries - k]], dim=1)  # (B, Q, C)
-            points = torch.cat([prop_points, points[:, : self.num_queries - k]], dim=1)
+            if k > nq:
+                raise ValueError(f"{k} propagated queries exceed {nq} queries")
+            # the propagated queries take slots 0..k-1, the first Q - k learned queries follow
+            q = torch.cat([prop_queries, q[:, : nq - k], q[:, nq:]], dim=1)  # (B, Q + A, C)
+            points = torch.cat([prop_points, points[:, : nq - k], points[:, nq:]], dim=1)
+        mask = None
+        if aux:  # two self-attention groups: main and one-to-many queries do not see each other
+            group = torch.arange(nq + aux, device=bev.device) >= nq  # (Q + A,)
+            mask = group[:, None] != group[None, :]  # (Q + A, Q + A) True: blocked
         logits, all_points = [], []
         for i, layer in enumerate(self.layers):
-            pos = self.point_embed(points.flatten(2))  # (B, Q, C)
+            pos = self.point_embed(points.flatten(2))  # (B, Q + A, C)
             base = points if i == 0 else points.detach()  # refine from the detached reference
-            q = layer(q, pos, bev, base.detach())  # (B, Q, C)
-            points = self.refine(i, q, base)  # (B, Q, P, 2)
-            logits.append(self.cls_heads[i](q))  # (B, Q, K)
+            q = layer(q, pos, bev, base.detach(), mask)  # (B, Q + A, C)
+            points = self.refine(i, q, base)  # (B, Q + A, P, 2)
+            logits.append(self.cls_heads[i](q))  # (B, Q + A, K)
             all_points.append(points)
-        return DecoderOutput(logits, all_points, q)
+        if not aux:
+            return DecoderOutput(logits, all_points, q)
+        return DecoderOutput(
+            [x[:, :nq] for x in logits],
+            [x[:, :nq] for x in all_points],
+            q[:, :nq],
+            [x[:, nq:] for x in logits],
+            [x[:, nq:] for x in all_points],
+        )

@@ -49,7 +49,9 @@ class DetectorOutput:
     slots 0..k-1), prop_src (B, k) their slots in the previous frame, trans_points (B, k, P, 2)
     in [0, 1] the points regressed from the U_MLP output (for L_trans); else k = 0 and None.
     seg_logits (B, K, X, Y): the dense BEV segmentation of a model with ``seg_head`` (training's
-    auxiliary target; computed in training mode only), else None.
+    auxiliary target; computed in training mode only), else None. aux_logits / aux_points: per
+    layer (B, A, K) / (B, A, P, 2), the one-to-many queries of a model with ``aux_queries`` in
+    training mode, else None.
     """
 
     logits: list[torch.Tensor]
@@ -60,6 +62,8 @@ class DetectorOutput:
     prop_src: torch.Tensor | None = None
     trans_points: torch.Tensor | None = None
     seg_logits: torch.Tensor | None = None
+    aux_logits: list[torch.Tensor] | None = None
+    aux_points: list[torch.Tensor] | None = None
 
     def scores(self) -> torch.Tensor:
         """(B, Q) max class probability of the last layer."""
@@ -96,6 +100,7 @@ class MapDetector(nn.Module):
             s.num_classes,
             s.heads,
             s.shared_reg,
+            s.aux_queries,
         )
         self.propagation = QueryPropagation(s.channels, hx, hy)
         self.register_buffer("pix_mean", torch.tensor([0.45, 0.45, 0.45]).view(1, 3, 1, 1), False)
@@ -168,7 +173,10 @@ class MapDetector(nn.Module):
             src, k = state.src_index, int(state.queries.shape[1])
         dec = self.decoder(bev, prop_q, prop_p)
         seg = self.seg(bev) if self.seg is not None and self.training else None  # (B,K,X,Y)
-        out = DetectorOutput(dec.logits, dec.points, dec.queries, bev, k, src, trans, seg)
+        out = DetectorOutput(
+            dec.logits, dec.points, dec.queries, bev, k, src, trans, seg,
+            dec.aux_logits, dec.aux_points,
+        )  # fmt: skip
         return out, self.next_state(out)
 
     def next_state(self, out: DetectorOutput) -> DetectorState:

@@ -93,6 +93,19 @@ class DetectionCriterion(nn.Module):
         return total / len(logits), matches
 
 
+def repeat_targets(gt: dict, repeats: int) -> dict:
+    """The targets of one-to-many matching: every GT instance ``repeats`` times (classes,
+    points01 and ids repeated, instance order kept within each copy), so that the Hungarian
+    matcher assigns up to ``repeats`` queries to each instance (MapTRv2's hybrid matching)."""
+    if repeats < 1:
+        raise ValueError(f"repeats must be >= 1, got {repeats}")
+    return {
+        "classes": gt["classes"].repeat(repeats),  # (R*G,)
+        "points01": gt["points01"].repeat(repeats, 1, 1),  # (R*G, P, 2)
+        "ids": gt["ids"].repeat(repeats),  # (R*G,)
+    }
+
+
 def trans_loss(
     trans_points: torch.Tensor,
     prop_src: torch.Tensor,

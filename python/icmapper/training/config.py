@@ -51,6 +51,9 @@ class Stage1Config:
     detach_state: bool = True
     #: weight of the dense BEV segmentation loss (needs model.seg_head; 0: off)
     seg_weight: float = 0.0
+    #: one-to-many matching (needs model.aux_queries > 0): GT repeats and the loss weight
+    one_to_many_repeats: int = 6
+    one_to_many_weight: float = 1.0
 
 
 @dataclass(frozen=True)
@@ -120,6 +123,8 @@ def _validate(cfg: TrainConfig) -> None:
             raise ValueError(f"config key {key} must be in [0, 1], got {v}")
     if cfg.snapshot_every < 0:
         raise ValueError(f"config key snapshot_every must be >= 0, got {cfg.snapshot_every}")
+    if s1.one_to_many_repeats < 1 or s1.one_to_many_weight < 0:
+        raise ValueError("stage1.one_to_many_repeats must be >= 1 and one_to_many_weight >= 0")
     if s1.seg_weight < 0:
         raise ValueError(f"config key stage1.seg_weight must be >= 0, got {s1.seg_weight}")
     if s1.seg_weight > 0 and not cfg.model.seg_head:

@@ -26,7 +26,7 @@ from torch import nn
 from icmapper.data.types import CLASS_NAMES, PerceptionRange
 from icmapper.models.config import ModelConfig
 from icmapper.models.decoder import MapDecoder
-from icmapper.models.losses import DetectionCriterion
+from icmapper.models.losses import DetectionCriterion, repeat_targets
 from icmapper.models.segmentation import rasterise
 
 
@@ -44,7 +44,7 @@ class PerfectBev(nn.Module):
         self.pos = nn.Parameter(torch.randn(1, c, cfg.bev_x, cfg.bev_y) * 0.02)  # (1, C, X, Y)
         self.decoder = MapDecoder(
             c, cfg.num_queries, cfg.num_layers, cfg.num_points, cfg.num_classes, cfg.heads,
-            cfg.shared_reg,
+            cfg.shared_reg, cfg.aux_queries,
         )  # fmt: skip
 
     def forward(self, masks: torch.Tensor):  # noqa: ANN201 - DecoderOutput
@@ -80,13 +80,15 @@ def _targets(frames: list, rng: PerceptionRange) -> list[dict]:
 
 
 def perfect_bev(config: Path, steps: int, train_spec: str, val_spec: str, batch: int,
-                log: bool = True) -> dict:  # fmt: skip
-    """Trains ``PerfectBev`` for ``steps`` and returns the detection result on ``val_spec``."""
+                log: bool = True, overrides: dict | None = None) -> dict:  # fmt: skip
+    """Trains ``PerfectBev`` for ``steps`` and returns the detection result on ``val_spec``
+    (``overrides``: config values as for ``icmapper train --set``; with ``model.aux_queries`` the
+    one-to-many loss of ``stage1`` is added as in stage-1 training)."""
     from icmapper.eval.evaluate import evaluate
     from icmapper.eval.runfmt import FramePredictions
     from icmapper.training.config import load_config
 
-    cfg = load_config(config)
+    cfg = load_config(config, overrides)
     rng = cfg.perception_range
     torch.manual_seed(cfg.seed)
     train = [g for seq in _frames(train_spec, rng, cfg.seed) for g in seq]
@@ -98,7 +100,13 @@ def perfect_bev(config: Path, steps: int, train_spec: str, val_spec: str, batch:
     for step in range(steps):
         pick = [train[i] for i in gen.integers(len(train), size=batch)]
         out = net(_masks(pick, cfg.model, rng))
-        loss, _ = crit(out.logits, out.points, _targets(pick, rng))
+        targets = _targets(pick, rng)
+        loss, _ = crit(out.logits, out.points, targets)
+        if out.aux_logits is not None and out.aux_points is not None:
+            rep = [repeat_targets(t, cfg.stage1.one_to_many_repeats) for t in targets]
+            loss = (
+                loss + cfg.stage1.one_to_many_weight * crit(out.aux_logits, out.aux_points, rep)[0]
+            )
         opt.zero_grad()
         loss.backward()
         torch.nn.utils.clip_grad_norm_(net.parameters(), cfg.stage1.grad_clip)
@@ -167,12 +175,16 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--batch", type=int, default=6)
     p.add_argument("--train", default="sim:train:128")
     p.add_argument("--val", default="sim:val:4")
+    p.add_argument("--set", action="append", metavar="TABLE.KEY=VALUE", help="config override")
     s = sub.add_parser("seg-iou", help="IoU of a checkpoint's segmentation head")
     s.add_argument("checkpoint", type=Path)
     s.add_argument("--source", default="sim:val:4")
     args = ap.parse_args(argv)
     if args.what == "perfect-bev":
-        det = perfect_bev(args.config, args.steps, args.train, args.val, args.batch)
+        from icmapper.settings import parse_assignments
+
+        over = parse_assignments(args.set or [])
+        det = perfect_bev(args.config, args.steps, args.train, args.val, args.batch, True, over)
         print(json.dumps({"AP_class": det["AP_class"], "mAP": det["mAP"]}, indent=1))
     else:
         print(json.dumps(seg_iou(args.checkpoint, args.source), indent=1))

@@ -24,6 +24,7 @@ from icmapper.models.losses import (
     association_loss,
     association_targets,
     fusion_loss,
+    repeat_targets,
     trans_loss,
 )
 from icmapper.models.network import ICMapperNet
@@ -67,7 +68,8 @@ def check_batch(batch: dict) -> None:
 
 class Stage1Objective(nn.Module):
     """forward(batch) -> {'loss', 'det', 'trans', 'asso', 'seg'} averaged over the clip's frames
-    ('seg': the dense BEV segmentation loss, 0 unless ``stage1.seg_weight`` > 0)."""
+    ('seg': the dense BEV segmentation loss, 0 unless ``stage1.seg_weight`` > 0; with
+    ``model.aux_queries`` > 0 also 'o2m', the one-to-many detection loss)."""
 
     def __init__(self, net: ICMapperNet, cfg: TrainConfig) -> None:
         super().__init__()
@@ -77,6 +79,8 @@ class Stage1Objective(nn.Module):
         self.criterion = DetectionCriterion(cfg.model.num_classes, s.cls_weight, s.pts_weight)
         self.alpha, self.beta = s.alpha_trans, s.beta_asso
         self.seg_weight = s.seg_weight
+        self.o2m_repeats, self.o2m_weight = s.one_to_many_repeats, s.one_to_many_weight
+        self.o2m = net.detector.cfg.aux_queries > 0
         self.detach_state = s.detach_state
 
     def seg_targets(self, gts: list[dict], out: DetectorOutput) -> torch.Tensor:
@@ -125,7 +129,7 @@ class Stage1Objective(nn.Module):
         prev: DetectorOutput | None = None
         prev_matches: list[FrameMatch] | None = None
         zero = batch["images"].new_zeros((), dtype=torch.float32)
-        l_det, l_trans, l_asso, l_seg = zero, zero, zero, zero
+        l_det, l_trans, l_asso, l_seg, l_o2m = zero, zero, zero, zero, zero
         n_asso = 0
         for t in range(t_len):
             motion = prev_to_cur(batch["poses"], t) if t > 0 else None
@@ -139,6 +143,9 @@ class Stage1Objective(nn.Module):
             gts = [prepare_gt(g[t], self.detector, dev) for g in batch["gt"]]
             det_loss, matches = self.criterion(out.logits, out.points, gts)
             l_det = l_det + det_loss
+            if out.aux_logits is not None and out.aux_points is not None:
+                rep = [repeat_targets(g, self.o2m_repeats) for g in gts]
+                l_o2m = l_o2m + self.criterion(out.aux_logits, out.aux_points, rep)[0]
             if self.seg_weight > 0 and out.seg_logits is not None:
                 l_seg = l_seg + seg_loss(out.seg_logits, self.seg_targets(gts, out))
             if out.trans_points is not None and out.prop_src is not None and prev_matches:
@@ -156,8 +163,11 @@ class Stage1Objective(nn.Module):
         l_trans = l_trans / max(1, t_len - 1)
         l_asso = l_asso / max(1, n_asso)
         l_seg = l_seg / t_len
+        l_o2m = l_o2m / t_len
         total = l_det + self.alpha * l_trans + self.beta * l_asso + self.seg_weight * l_seg
-        return {"loss": total, "det": l_det, "trans": l_trans, "asso": l_asso, "seg": l_seg}
+        total = total + self.o2m_weight * l_o2m
+        losses = {"loss": total, "det": l_det, "trans": l_trans, "asso": l_asso, "seg": l_seg}
+        return {**losses, "o2m": l_o2m} if self.o2m else losses
 
 
 class Stage2Objective(nn.Module):
