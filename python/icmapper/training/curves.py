@@ -87,8 +87,8 @@ def plot(rows: list[dict[str, float]], metrics_csv: Path, out: Path, title: str)
     ax.grid(alpha=0.3)
     ax.legend()
     logged = read_rows(metrics_csv)
-    for key in ("det", "seg", "trans", "asso", "fusion"):
-        if logged and key in logged[0]:
+    for key in ("det", "o2m", "seg", "trans", "asso", "fusion"):
+        if logged and key in logged[0] and any(r[key] > 0 for r in logged):
             xs = [r["step"] for r in logged]
             ys = [r[key] for r in logged]
             win = max(1, len(ys) // 100)  # moving average over ~1 % of the run
