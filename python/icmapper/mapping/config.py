@@ -57,6 +57,11 @@ class MapperConfig:
     city_min_overlap: float = _f(
         0.5, "city merge: share of an instance within the gate for two instances to merge"
     )
+    city_tolerance: float = _f(
+        3.0,
+        "city merge: metres a polyline merge may move any point of either instance (or add "
+        "away from both); a merge beyond it is refused and the instances stay apart",
+    )
 
     def __post_init__(self) -> None:
         for name in ("detect_threshold", "track_threshold", "assoc_threshold",
@@ -67,7 +72,8 @@ class MapperConfig:
         if self.track_threshold < self.detect_threshold:
             raise ValueError("MapperConfig.track_threshold must be >= detect_threshold")
         for name in ("positional_scale", "spacing", "history_points", "gate",
-                     "vma_overlap", "cluster_eps", "polymerge_buffer", "city_gate"):  # fmt: skip
+                     "vma_overlap", "cluster_eps", "polymerge_buffer", "city_gate",
+                     "city_tolerance"):  # fmt: skip
             if not getattr(self, name) > 0:
                 raise ValueError(f"MapperConfig.{name} must be > 0, got {getattr(self, name)}")
         for name in ("min_hits", "cluster_min_samples"):
