@@ -151,8 +151,8 @@ AV2_LOG = "7fab2350-7eaf-3b7e-a39d-6937a4c1bede"
 def test_av2_city_map_beats_single_drives(shared_data: Path, tmp_path: Path) -> None:
     """Regression (issue 16): on 6 lane-graph drives over a real AV2 log the city map lost whole
     sides of block boundaries in the merges (CD_boundary 0.72 m, mCD 0.367 m against a
-    single-drive mean of 0.208 m). With the merge's tolerance check: CD_boundary 0.26 m, and the
-    city map within 5 % of the single-drive mean."""
+    single-drive mean of 0.208 m). With the merge's tolerance check and the 1.0 m city gate:
+    CD_boundary 0.26 m, mCD 0.197 m, below the single-drive mean."""
     from icmapper.city.evaluate import evaluate_city
 
     log = shared_data / "av2-mini" / AV2_LOG
@@ -163,4 +163,4 @@ def test_av2_city_map_beats_single_drives(shared_data: Path, tmp_path: Path) -> 
     r = evaluate_city(city)
     assert r["n_drives"] == 6
     assert r["city"]["CD"]["boundary"] < 0.35, r["city"]["CD"]
-    assert r["city"]["mCD"] < 1.05 * r["single_drive_mean"]["mCD"], r
+    assert r["city"]["mCD"] < r["single_drive_mean"]["mCD"], r

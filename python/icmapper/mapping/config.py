@@ -53,7 +53,7 @@ class MapperConfig:
     polymerge_buffer: float = _f(1.0, "PolyMerge: overlap buffer (m)")
     polymerge_min_overlap: float = _f(0.3, "PolyMerge: share of a detection that must overlap")
     # ---- city maps (icmapper map --city): merging drive maps in the engine
-    city_gate: float = _f(1.5, "city merge: metres within which instances of two maps overlap")
+    city_gate: float = _f(1.0, "city merge: metres within which instances of two maps overlap")
     city_min_overlap: float = _f(
         0.5, "city merge: share of an instance within the gate for two instances to merge"
     )
