@@ -339,9 +339,11 @@ def test_merge_map_with_itself_and_bad_arguments() -> None:
         {"gate": float("nan")},
         {"min_overlap": 0.0},
         {"min_overlap": 1.5},
+        {"tolerance": 0.0},
+        {"tolerance": float("inf")},
     )
     for kwargs in bad_kwargs:
-        with pytest.raises(ValueError, match="gate|min_overlap"):
+        with pytest.raises(ValueError, match="gate|min_overlap|tolerance"):
             m.merge_map(other, **kwargs)
     with pytest.raises(TypeError):
         m.merge_map("not a map")  # type: ignore[arg-type]
@@ -540,3 +542,46 @@ def test_corrupt_bytes_and_absurd_headers_raise_value_error() -> None:
             GlobalMap.from_bytes(forged(offset, value))
     with pytest.raises(TypeError):
         GlobalMap.from_bytes("text")  # type: ignore[arg-type]
+
+
+def _dense(corners: list[tuple[float, float]]) -> np.ndarray:
+    """Points every 0.5 m along the polyline through ``corners``: (n, 2)."""
+    out = [np.asarray(corners[:1], dtype=np.float64)]
+    for a, b in itertools.pairwise(np.asarray(corners, dtype=np.float64)):
+        n = int(np.ceil(np.linalg.norm(b - a) / 0.5))
+        out.append(a + (b - a) * (np.arange(1, n + 1) / n)[:, None])
+    return np.concatenate(out)
+
+
+@pytest.mark.parametrize(
+    ("first", "second"),
+    [
+        # Two drives saw three sides of a 40 x 20 m block each, the ring closes across them.
+        ([(0, 20), (0, 0), (40, 0), (40, 20)], [(40, 0), (40, 20), (0, 20), (0, 0)]),
+        # A piece along the middle of a long boundary that then turns away.
+        ([(0, 0), (100, 0)], [(10, 0.2), (60, 0.2), (60, 20), (80, 20)]),
+    ],
+)
+def test_merge_map_loses_and_invents_no_polyline(
+    first: list[tuple[float, float]], second: list[tuple[float, float]]
+) -> None:
+    """Regression (issue 16, AV2 city map): the curve-fit merge of two long boundaries that
+    overlap only in part dropped whole sides (CD_bound 0.72 m on 6 AV2 drives). Every input
+    vertex lies within the tolerance of the merged map and every merged vertex within it of the
+    inputs (shapely distances); an unchecked merge (a tolerance too large to refuse) does not."""
+    a, b = _dense(first), _dense(second)
+
+    def gaps(tolerance: float) -> tuple[float, float]:
+        m, o = GlobalMap(), GlobalMap()
+        m.insert(2, a)
+        o.insert(2, b)
+        m.merge_map(o, tolerance=tolerance)
+        out = MultiLineString([m.get(int(i))[1] for i in m.ids()])
+        inputs = MultiLineString([a, b])
+        lost = max(out.distance(Point(q)) for q in np.concatenate([a, b]))
+        invented = max(inputs.distance(Point(q)) for i in m.ids() for q in m.get(int(i))[1])
+        return lost, invented
+
+    lost, invented = gaps(3.0)
+    assert lost <= 3.0 and invented <= 3.0, (lost, invented)
+    assert max(gaps(1e9)) > 6.0

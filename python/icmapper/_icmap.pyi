@@ -199,7 +199,11 @@ class GlobalMap:
         nothing changes): ``info(id)["drives"]`` then contains it."""
 
     def merge_map(
-        self, other: GlobalMap, gate: float = 1.5, min_overlap: float = 0.5
+        self,
+        other: GlobalMap,
+        gate: float = 1.5,
+        min_overlap: float = 0.5,
+        tolerance: float = 3.0,
     ) -> MergeMapStats:
         """Merges every instance of ``other`` into this map; ``other`` is unchanged.
 
@@ -212,13 +216,20 @@ class GlobalMap:
         ``other`` are joined only through one of this map), merged from its largest member in
         breadth-first order of the overlaps (larger share, then smaller mean distance, then lower
         id) by the class rules: the curve-fit merge (``merge_polyline`` with this map's smoothing
-        and spacing) for polylines, polygon union for crossings. It keeps the lowest id of its
+        and spacing) for polylines, polygon union for crossings. A polyline merge is kept only
+        when every vertex of both members lies within ``tolerance`` metres of the result and
+        every vertex of the result within ``tolerance`` of a member (nothing lost, nothing
+        invented such as a jump between far-apart pieces); the merge of the second into the
+        first is tried, then of the first into the second; if neither holds, the member is left
+        out of the group (an instance of this map stays as it was, one of ``other`` is
+        inserted). The group keeps the lowest id of its
         instances of this map; its drives are the union, its observations the sum, its first /
         last frame the min / max of its members'. The other instances of ``other`` are inserted
         with fresh ids (ascending id order of ``other``), geometry and bookkeeping copied.
         Deterministic; the order in which drive maps are merged changes the result only within
         the drives' disagreement (tested: map Chamfer per class <= 0.25 m for drives offset by
-        up to 0.14 m). ValueError for ``gate`` not finite or < 0, ``min_overlap`` outside (0, 1];
+        up to 0.14 m). ValueError for ``gate`` not finite or < 0, ``min_overlap`` outside (0, 1],
+        ``tolerance`` not finite or <= 0;
         TypeError if ``other`` is not a GlobalMap. The GIL is released (the overlap tests and
         the groups' merges run in parallel)."""
 

@@ -23,8 +23,16 @@
 //!    breadth-first order over the edges, neighbours by overlap (larger share first, then smaller
 //!    `D`, then lower id), each merged by the class rule: `merge_polyline` with `self`'s
 //!    smoothing and spacing for dividers and boundaries, `merge_polygon` (union, resampled at
-//!    spacing) for crossings. A member whose merge fails (not expected for valid geometry) is
-//!    left out: an instance of `self` stays as it was, one of `other` is inserted. The group keeps
+//!    spacing) for crossings. The curve-fit merge splices one polyline into the other where it
+//!    projects and keeps the rest of the base, so two long polylines that overlap only in part
+//!    (a block's boundary seen by two drives as two U shapes, a piece that runs along a
+//!    boundary and turns away from it) could lose whole sides or be joined across a gap; a
+//!    polyline merge is therefore kept only when it is *faithful* within
+//!    [`MergeMapParams::tolerance`]: every vertex of both members within the tolerance of the
+//!    result, every vertex of the result within the tolerance of a member. The merge of the
+//!    member into the group's geometry is tried first, then the reverse. A member whose merge
+//!    fails (no faithful merge, or invalid geometry) is left out: an instance of `self` stays
+//!    as it was, one of `other` is inserted. The group keeps
 //!    the lowest id of its instances of `self`; the other instances of `self` in it are removed
 //!    ("absorbed").
 //! 4. **Inserts.** The instances of `other` in no group are inserted with fresh ids of `self` (in
@@ -52,6 +60,8 @@ use std::collections::{HashMap, VecDeque};
 pub const DEFAULT_GATE: f64 = 1.5;
 /// Default share of points that makes two instances overlap ([`MergeMapParams`]).
 pub const DEFAULT_MIN_OVERLAP: f64 = 0.5;
+/// Default largest deviation of a polyline merge ([`MergeMapParams::tolerance`]), metres.
+pub const DEFAULT_TOLERANCE: f64 = 3.0;
 
 /// The tunables of [`GlobalMap::merge_map`].
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -61,6 +71,12 @@ pub struct MergeMapParams {
     pub gate: f64,
     /// The share of points (in (0, 1]) within the gate that makes two instances overlap.
     pub min_overlap: f64,
+    /// Largest deviation (metres, finite, > 0) of a polyline merge: the merge of two polylines is
+    /// kept only when every vertex of both lies within `tolerance` of the result (nothing of
+    /// either is lost) and every vertex of the result within `tolerance` of one of them (nothing
+    /// invented, such as a jump between far-apart pieces); otherwise the member stays a
+    /// separate instance (see the module docs, step 3).
+    pub tolerance: f64,
 }
 
 impl Default for MergeMapParams {
@@ -68,13 +84,20 @@ impl Default for MergeMapParams {
         MergeMapParams {
             gate: DEFAULT_GATE,
             min_overlap: DEFAULT_MIN_OVERLAP,
+            tolerance: DEFAULT_TOLERANCE,
         }
     }
 }
 
 impl MergeMapParams {
-    /// Checks `gate` finite and >= 0, `min_overlap` in (0, 1].
+    /// Checks `gate` finite and >= 0, `min_overlap` in (0, 1], `tolerance` finite and > 0.
     pub fn validate(&self) -> Result<()> {
+        if !(self.tolerance.is_finite() && self.tolerance > 0.0) {
+            return Err(GeomError::InvalidParameter {
+                name: "tolerance",
+                reason: format!("must be finite and > 0, got {}", self.tolerance),
+            });
+        }
         if !(self.gate.is_finite() && self.gate >= 0.0) {
             return Err(GeomError::InvalidParameter {
                 name: "gate",
@@ -118,8 +141,10 @@ struct Outline<'a> {
 
 impl<'a> Outline<'a> {
     fn new(inst: &'a Instance) -> Self {
-        let pts = &inst.points[..];
-        let closed = inst.closed;
+        Self::of(&inst.points, inst.closed)
+    }
+
+    fn of(pts: &'a [Point], closed: bool) -> Self {
         let nseg = segment_count(pts.len(), closed);
         let blocks = (0..nseg)
             .step_by(BLOCK)
@@ -290,20 +315,55 @@ impl UnionFind {
     }
 }
 
-/// The class rule of a whole-instance merge: `detected` merged into `current`.
+/// Whether every vertex of `pts` lies within `tol` of `outline`.
+fn within(pts: &[Point], outline: &Outline<'_>, tol: f64) -> bool {
+    pts.iter()
+        .all(|p| outline.distance_within(p, tol).is_some())
+}
+
+/// Whether `merged` is a faithful merge of the polylines `a` and `b`: every vertex of `a` and
+/// `b` within `tol` of it, every vertex of it within `tol` of `a` or `b`.
+fn faithful(merged: &[Point], a: &[Point], b: &[Point], tol: f64) -> bool {
+    let (om, oa, ob) = (
+        Outline::of(merged, false),
+        Outline::of(a, false),
+        Outline::of(b, false),
+    );
+    within(a, &om, tol)
+        && within(b, &om, tol)
+        && merged
+            .iter()
+            .all(|p| oa.distance_within(p, tol).is_some() || ob.distance_within(p, tol).is_some())
+}
+
+/// The class rule of a whole-instance merge: `detected` merged into `current`. Polylines: the
+/// curve-fit merge of `detected` into `current`, else of `current` into `detected` (the splice
+/// keeps the base's parts outside the other's projection, so the roles matter when the two only
+/// partly overlap), the first that is [`faithful`] within `tolerance`; neither is an error
+/// (the member is left out of the group).
 fn merge_geometry(
     closed: bool,
     current: &[Point],
     detected: &[Point],
     config: &MapConfig,
+    tolerance: f64,
 ) -> Result<Vec<Point>> {
-    let merged = if closed {
-        merge_polygon(current, detected, config.spacing)?
-    } else {
-        merge_polyline(current, detected, config.smoothing, config.spacing)?
-    };
-    validate_points(&merged, if closed { 3 } else { 2 }, "merged geometry")?;
-    Ok(merged)
+    if closed {
+        let merged = merge_polygon(current, detected, config.spacing)?;
+        validate_points(&merged, 3, "merged geometry")?;
+        return Ok(merged);
+    }
+    for (base, other) in [(current, detected), (detected, current)] {
+        let merged = merge_polyline(base, other, config.smoothing, config.spacing)?;
+        validate_points(&merged, 2, "merged geometry")?;
+        if faithful(&merged, current, detected, tolerance) {
+            return Ok(merged);
+        }
+    }
+    Err(GeomError::Degenerate {
+        what: "polyline merge".into(),
+        reason: format!("no merge keeps both polylines within {tolerance} m"),
+    })
 }
 
 impl GlobalMap {
@@ -460,9 +520,13 @@ impl GlobalMap {
                 let mut ok = vec![g.order[0]];
                 for &n in &g.order[1..] {
                     let inst = instance(n);
-                    if let Ok(points) =
-                        merge_geometry(merged.closed, &merged.points, &inst.points, &config)
-                    {
+                    if let Ok(points) = merge_geometry(
+                        merged.closed,
+                        &merged.points,
+                        &inst.points,
+                        &config,
+                        params.tolerance,
+                    ) {
                         merged.points = points;
                         merged.first_frame = merged.first_frame.min(inst.first_frame);
                         merged.last_frame = merged.last_frame.max(inst.last_frame);
@@ -625,6 +689,7 @@ mod tests {
             let params = MergeMapParams {
                 gate,
                 min_overlap: share,
+                ..MergeMapParams::default()
             };
             assert!(
                 matches!(
@@ -788,6 +853,7 @@ mod tests {
                 MergeMapParams {
                     gate: 1.5,
                     min_overlap: 0.2,
+                    ..MergeMapParams::default()
                 },
             )
             .unwrap();
@@ -804,6 +870,96 @@ mod tests {
         assert_eq!(share, 0.0);
         let (share, mean) = instance_overlap(a.get(0).unwrap(), c.get(0).unwrap(), 2.5);
         assert!(share > 0.95 && (mean - 2.0).abs() < 0.1, "{share} {mean}");
+    }
+
+    /// Points every 0.5 m along the polyline through `corners`.
+    fn dense(corners: &[(f64, f64)]) -> Vec<Point> {
+        let mut out = vec![p(corners[0].0, corners[0].1)];
+        for w in corners.windows(2) {
+            let (a, b) = (p(w[0].0, w[0].1), p(w[1].0, w[1].1));
+            let n = ((b - a).norm() / 0.5).ceil() as usize;
+            out.extend((1..=n).map(|k| a + (b - a) * (k as f64 / n as f64)));
+        }
+        out
+    }
+
+    /// The largest distance from a vertex of `from` to the nearest instance of `to` (any class).
+    fn worst_gap(from: &[&[Point]], to: &[&[Point]]) -> f64 {
+        from.iter()
+            .flat_map(|pts| pts.iter())
+            .map(|q| {
+                to.iter()
+                    .map(|t| boundary_distance(q, t, false))
+                    .fold(f64::INFINITY, f64::min)
+            })
+            .fold(0.0, f64::max)
+    }
+
+    /// Regression (AV2 city maps, issue 16): two drives' pieces of a block's boundary that
+    /// overlap at both ends (the ring closes) or in a T were spliced so that a whole side was
+    /// dropped, or far-apart pieces joined. With the tolerance check nothing of either map is
+    /// lost and nothing is invented; without it (a tolerance too large to refuse anything) the
+    /// same merges lose geometry.
+    #[test]
+    fn polyline_merges_lose_nothing_and_invent_nothing() {
+        let cases: [(Vec<Point>, Vec<Point>); 2] = [
+            // Three sides of a 40 x 20 m block, and the three sides across (a ring closes).
+            (
+                dense(&[(0.0, 20.0), (0.0, 0.0), (40.0, 0.0), (40.0, 20.0)]),
+                dense(&[(40.0, 0.0), (40.0, 20.0), (0.0, 20.0), (0.0, 0.0)]),
+            ),
+            // More than half of the piece lies along the middle of the long boundary, then it
+            // turns away (a T with an L-shaped stem).
+            (
+                dense(&[(0.0, 0.0), (100.0, 0.0)]),
+                dense(&[(10.0, 0.2), (60.0, 0.2), (60.0, 20.0), (80.0, 20.0)]),
+            ),
+        ];
+        for (k, (pa, pb)) in cases.iter().enumerate() {
+            let run = |tolerance: f64| {
+                let mut a = map();
+                a.insert(MapClass::Boundary, pa, 0).unwrap();
+                let mut b = map();
+                b.insert(MapClass::Boundary, pb, 1).unwrap();
+                let params = MergeMapParams {
+                    tolerance,
+                    ..MergeMapParams::default()
+                };
+                a.merge_map(&b, params).unwrap();
+                a.check_invariants().unwrap();
+                let out: Vec<Vec<Point>> = a.instances().iter().map(|i| i.points.clone()).collect();
+                out
+            };
+            let inputs: [&[Point]; 2] = [pa, pb];
+            let out = run(DEFAULT_TOLERANCE);
+            let outs: Vec<&[Point]> = out.iter().map(|v| &v[..]).collect();
+            let (lost, invented) = (worst_gap(&inputs, &outs), worst_gap(&outs, &inputs));
+            assert!(
+                lost <= DEFAULT_TOLERANCE && invented <= DEFAULT_TOLERANCE,
+                "case {k}: lost {lost} invented {invented}"
+            );
+            let old = run(1e9);
+            let olds: Vec<&[Point]> = old.iter().map(|v| &v[..]).collect();
+            let (lost, invented) = (worst_gap(&inputs, &olds), worst_gap(&olds, &inputs));
+            assert!(
+                lost.max(invented) > 2.0 * DEFAULT_TOLERANCE,
+                "case {k}: the unchecked merge was faithful ({lost}, {invented}): the test shows nothing"
+            );
+        }
+        // The tolerance is checked.
+        for tolerance in [0.0, -1.0, f64::NAN, f64::INFINITY] {
+            let params = MergeMapParams {
+                tolerance,
+                ..MergeMapParams::default()
+            };
+            assert!(matches!(
+                map().merge_map(&map(), params),
+                Err(GeomError::InvalidParameter {
+                    name: "tolerance",
+                    ..
+                })
+            ));
+        }
     }
 
     #[test]

@@ -115,6 +115,12 @@ pub fn load(path: &Path) -> Result<GlobalMap> {
 /// dead process, never those of a live one (whatever its PID namespace), and the age covers the
 /// instant between creating a file and locking it.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
+    write_atomic_parts(path, &[bytes])
+}
+
+/// [`write_atomic`] of the concatenation of `parts` (written one after the other, without
+/// joining them in memory first).
+pub fn write_atomic_parts(path: &Path, parts: &[&[u8]]) -> Result<()> {
     static COUNTER: AtomicU64 = AtomicU64::new(0);
     let io_err = |p: &Path| {
         let p = p.display().to_string();
@@ -156,7 +162,9 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
         // (A file system without locks: nobody can tell this file from a dead writer's, and
         // `remove_stale_temps` removes nothing there either.)
         let _ = f.lock();
-        f.write_all(bytes).map_err(io_err(&tmp))?;
+        for bytes in parts {
+            f.write_all(bytes).map_err(io_err(&tmp))?;
+        }
         f.sync_all().map_err(io_err(&tmp))?;
         fs::rename(&tmp, path).map_err(io_err(path))
     })();

@@ -59,7 +59,7 @@
 //! problem is a [`GeomError::Format`] naming the file.
 
 use crate::error::{GeomError, Result};
-use crate::persist::{write_atomic, MAGIC};
+use crate::persist::{write_atomic_parts, MAGIC};
 use crate::store::{GlobalMap, Instance, MapConfig};
 use crate::types::{MapClass, Point};
 use parry2d_f64::bounding_volume::{Aabb, BoundingVolume};
@@ -256,6 +256,17 @@ fn encode_instance(out: &mut Vec<u8>, inst: &Instance, drives: &[u32], encoding:
 
 /// The map file contents of `map` in format version 2.
 pub fn to_bytes(map: &GlobalMap, encoding: Encoding) -> Vec<u8> {
+    let (mut out, blocks) = encode(map, encoding);
+    out.reserve_exact(blocks.iter().map(Vec::len).sum());
+    for bytes in &blocks {
+        out.extend_from_slice(bytes);
+    }
+    out
+}
+
+/// The file of `map` in two parts: the head (magic .. head checksum) and the blocks, in file
+/// order (their concatenation is [`to_bytes`]).
+fn encode(map: &GlobalMap, encoding: Encoding) -> (Vec<u8>, Vec<Vec<u8>>) {
     // Instances in storage order (their data is read in memory order where possible).
     let insts: Vec<&Instance> = map.instances_iter().collect();
     // Each instance's drives: a merge join of (id, position) and the provenance table, both
@@ -312,7 +323,7 @@ pub fn to_bytes(map: &GlobalMap, encoding: Encoding) -> Vec<u8> {
         .collect();
     let body_len: usize = blocks.iter().map(|b| b.0.len()).sum();
     let head_len = PREFIX + HEADER + blocks.len() * INDEX_ENTRY;
-    let mut out = Vec::with_capacity(head_len + 8 + body_len);
+    let mut out = Vec::with_capacity(head_len + 8);
     out.extend_from_slice(MAGIC);
     out.extend_from_slice(&FORMAT_VERSION_2.to_le_bytes());
     let cfg = map.config();
@@ -343,15 +354,18 @@ pub fn to_bytes(map: &GlobalMap, encoding: Encoding) -> Vec<u8> {
     }
     let head_sum = hash64(&out);
     out.extend_from_slice(&head_sum.to_le_bytes());
-    for (bytes, _, _) in &blocks {
-        out.extend_from_slice(bytes);
-    }
-    out
+    (out, blocks.into_iter().map(|b| b.0).collect())
 }
 
-/// Writes `map` to `path` atomically (temp file in the same folder, fsync, rename) in format 2.
+/// Writes `map` to `path` atomically (temp file in the same folder, fsync, rename) in format 2:
+/// the head and the blocks are written one after the other (the bytes of [`to_bytes`], without
+/// joining them in memory).
 pub fn save(map: &GlobalMap, path: &Path, encoding: Encoding) -> Result<()> {
-    write_atomic(path, &to_bytes(map, encoding))
+    let (head, blocks) = encode(map, encoding);
+    let parts: Vec<&[u8]> = std::iter::once(&head[..])
+        .chain(blocks.iter().map(|b| &b[..]))
+        .collect();
+    write_atomic_parts(path, &parts)
 }
 
 // ------------------------------------------------------------------------------------ reading
@@ -1191,7 +1205,11 @@ mod tests {
         std::fs::create_dir_all(&dir).unwrap();
         let path = dir.join("city.icmap");
         let m = grid_map(3000, 0.2);
-        save(&m, &path, Encoding::Exact).unwrap();
+        // The file written in parts is byte for byte the joined bytes, in both encodings.
+        for encoding in [Encoding::Compact, Encoding::Exact] {
+            save(&m, &path, encoding).unwrap();
+            assert_eq!(std::fs::read(&path).unwrap(), to_bytes(&m, encoding));
+        }
         same(&m, &load(&path).unwrap());
         let regions = [
             [0.0, 0.0, 40.0, 40.0],

@@ -342,15 +342,20 @@ impl PyGlobalMap {
 
     /// Merges every instance of `other` into this map (see `icmap_geom::merge_map`): returns
     /// dict(merged, inserted, absorbed). `other` is unchanged; the GIL is released.
-    #[pyo3(signature = (other, gate = 1.5, min_overlap = 0.5))]
+    #[pyo3(signature = (other, gate = 1.5, min_overlap = 0.5, tolerance = 3.0))]
     fn merge_map<'py>(
         &self,
         py: Python<'py>,
         other: &Bound<'py, PyGlobalMap>,
         gate: f64,
         min_overlap: f64,
+        tolerance: f64,
     ) -> PyResult<Bound<'py, PyDict>> {
-        let params = MergeMapParams { gate, min_overlap };
+        let params = MergeMapParams {
+            gate,
+            min_overlap,
+            tolerance,
+        };
         let other: &PyGlobalMap = other.get();
         let stats = py.detach(|| {
             if std::ptr::eq(self, other) {

@@ -43,6 +43,7 @@ def run_on_ray(
     address: str | None = None,
     gate: float = 1.5,
     min_overlap: float = 0.5,
+    tolerance: float = 3.0,
 ) -> tuple[list[DriveOutcome], bytes | None]:
     """Maps ``tasks`` on ``workers`` Ray actors and merges the drive maps by a tree of Ray tasks.
     Returns the outcomes (in task order; map bytes dropped) and the merged map's bytes (None when
@@ -72,7 +73,7 @@ def run_on_ray(
         refs = [ray.put(o.map_bytes) for o in ok]
         merged = None
         if refs:
-            root = tree_reduce(refs, lambda a, b: merge.remote(a, b, gate, min_overlap))
+            root = tree_reduce(refs, lambda a, b: merge.remote(a, b, gate, min_overlap, tolerance))
             merged = ray.get(root)
         for o in outcomes:
             o.map_bytes = None

@@ -25,10 +25,13 @@ def tree_reduce(items: list[T], merge: Callable[[T, T], T]) -> T:
     return level[0]
 
 
-def merge_bytes(a: bytes, b: bytes, gate: float, min_overlap: float) -> bytes:
-    """Map ``b`` merged into map ``a`` (both native bytes) -> native bytes of the result."""
+def merge_bytes(
+    a: bytes, b: bytes, gate: float, min_overlap: float, tolerance: float = 3.0
+) -> bytes:
+    """Map ``b`` merged into map ``a`` (both native bytes) -> native bytes of the result
+    (``GlobalMap.merge_map`` with ``gate``, ``min_overlap`` and ``tolerance``, metres / share)."""
     from icmapper._icmap import GlobalMap
 
     left = GlobalMap.from_bytes(a)
-    left.merge_map(GlobalMap.from_bytes(b), gate=gate, min_overlap=min_overlap)
+    left.merge_map(GlobalMap.from_bytes(b), gate=gate, min_overlap=min_overlap, tolerance=tolerance)
     return left.to_bytes()

@@ -59,6 +59,10 @@ def _drive_tasks(
 
 
 def _check_compatible(old: CityManifest, new: CityManifest, city: Path) -> None:
+    from icmapper.mapping.config import MapperConfig
+
+    # (A manifest written before a config field existed holds that field's default.)
+    old.mapper_config = MapperConfig.from_dict(old.mapper_config).to_dict()
     for key in ("method", "detections", "checkpoint", "range_name", "mode", "mapper_config"):
         if getattr(old, key) != getattr(new, key):
             raise ValueError(
@@ -86,7 +90,7 @@ def build_city(
     from icmapper.mapping.config import MapperConfig
 
     cfg = MapperConfig.from_dict(settings.config)
-    gate, min_overlap = cfg.city_gate, cfg.city_min_overlap
+    gate, min_overlap, tol = cfg.city_gate, cfg.city_min_overlap, cfg.city_tolerance
     if mode not in MODES:
         raise ValueError(f"unknown city mode {mode!r}; expected one of {', '.join(MODES)}")
     city = Path(city)
@@ -119,20 +123,22 @@ def build_city(
         if workers:
             from icmapper.city.ray_backend import run_on_ray
 
-            outcomes, merged = run_on_ray(settings, tasks, workers, ray_address, gate, min_overlap)
+            outcomes, merged = run_on_ray(
+                settings, tasks, workers, ray_address, gate, min_overlap, tol
+            )
         else:
             mapper = DriveMapper(settings)
             outcomes = [mapper.map_drive(t) for t in tasks]
             maps = [o.map_bytes for o in sorted(outcomes, key=lambda o: o.index) if o.map_bytes]
             merged = (
-                tree_reduce(maps, lambda a, b: merge_bytes(a, b, gate, min_overlap))
+                tree_reduce(maps, lambda a, b: merge_bytes(a, b, gate, min_overlap, tol))
                 if maps
                 else None
             )
         for task, outcome in zip(tasks, outcomes, strict=True):
             _record(manifest, task, outcome, city, log)
         if merged is not None:
-            current = merge_bytes(current, merged, gate, min_overlap) if current else merged
+            current = merge_bytes(current, merged, gate, min_overlap, tol) if current else merged
             GlobalMap.from_bytes(current).save(str(city_map), compact=True)
         write_manifest(city, manifest)
     failed = [d for d in manifest.drives if d.status != "ok"]

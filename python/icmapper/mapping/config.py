@@ -53,9 +53,14 @@ class MapperConfig:
     polymerge_buffer: float = _f(1.0, "PolyMerge: overlap buffer (m)")
     polymerge_min_overlap: float = _f(0.3, "PolyMerge: share of a detection that must overlap")
     # ---- city maps (icmapper map --city): merging drive maps in the engine
-    city_gate: float = _f(1.5, "city merge: metres within which instances of two maps overlap")
+    city_gate: float = _f(1.0, "city merge: metres within which instances of two maps overlap")
     city_min_overlap: float = _f(
         0.5, "city merge: share of an instance within the gate for two instances to merge"
+    )
+    city_tolerance: float = _f(
+        3.0,
+        "city merge: metres a polyline merge may move any point of either instance (or add "
+        "away from both); a merge beyond it is refused and the instances stay apart",
     )
 
     def __post_init__(self) -> None:
@@ -67,7 +72,8 @@ class MapperConfig:
         if self.track_threshold < self.detect_threshold:
             raise ValueError("MapperConfig.track_threshold must be >= detect_threshold")
         for name in ("positional_scale", "spacing", "history_points", "gate",
-                     "vma_overlap", "cluster_eps", "polymerge_buffer", "city_gate"):  # fmt: skip
+                     "vma_overlap", "cluster_eps", "polymerge_buffer", "city_gate",
+                     "city_tolerance"):  # fmt: skip
             if not getattr(self, name) > 0:
                 raise ValueError(f"MapperConfig.{name} must be > 0, got {getattr(self, name)}")
         for name in ("min_hits", "cluster_min_samples"):
