@@ -185,7 +185,7 @@ def main(argv: list[str] | None = None) -> int:
 
         over = parse_assignments(args.set or [])
         det = perfect_bev(args.config, args.steps, args.train, args.val, args.batch, True, over)
-        print(json.dumps({"AP_class": det["AP_class"], "mAP": det["mAP"]}, indent=1))
+        print(json.dumps({k: det[k] for k in ("AP", "AP_class", "mAP")}, indent=1))
     else:
         print(json.dumps(seg_iou(args.checkpoint, args.source), indent=1))
     return 0
