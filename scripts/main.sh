@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # The main job: sets everything up, then runs IC-Mapper (shipped checkpoint) and every baseline on
-# synthetic validation cities (and on the Argoverse 2 logs in ../shared/data/av2-mini when present),
+# synthetic test cities (never used for training or for choosing the recipe; and on the Argoverse 2
+# logs in ../shared/data/av2-mini when present),
 # prints the paper-style comparison tables and writes run folders, global maps and pictures to
 # out/main/. Usage: bash scripts/main.sh [extra `icmapper compare` args]
 set -euo pipefail
@@ -8,7 +9,7 @@ cd "$(dirname "$0")/.."
 bash scripts/setup.sh
 export OMP_NUM_THREADS=${OMP_NUM_THREADS:-2}
 OUT=${ICMAPPER_OUT:-out/main}
-sources=(--source "sim:val:${ICMAPPER_SIM_SEQS:-4}")
+sources=(--source "sim:test:${ICMAPPER_SIM_SEQS:-4}")
 AV2=../shared/data/av2-mini
 if [ -d "$AV2" ]; then
     sources+=(--source "av2:$AV2")
