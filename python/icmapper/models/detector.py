@@ -174,9 +174,17 @@ class MapDetector(nn.Module):
         dec = self.decoder(bev, prop_q, prop_p)
         seg = self.seg(bev) if self.seg is not None and self.training else None  # (B,K,X,Y)
         out = DetectorOutput(
-            dec.logits, dec.points, dec.queries, bev, k, src, trans, seg,
-            dec.aux_logits, dec.aux_points,
-        )  # fmt: skip
+            dec.logits,
+            dec.points,
+            dec.queries,
+            bev,
+            num_propagated=k,
+            prop_src=src,
+            trans_points=trans,
+            seg_logits=seg,
+            aux_logits=dec.aux_logits,
+            aux_points=dec.aux_points,
+        )
         return out, self.next_state(out)
 
     def next_state(self, out: DetectorOutput) -> DetectorState:

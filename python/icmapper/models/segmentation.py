@@ -89,9 +89,8 @@ def rasterise(
             raise ValueError(f"class {k} out of range for {num_classes} classes")
         line = pts[g]  # (P, 2)
         closed = k == CROSSING
-        a = line
-        b = line.roll(-1, 0) if closed else line[1:]
-        a = a if closed else line[:-1]
+        # segments a -> b: consecutive points, and the closing edge of a crossing's contour
+        a, b = (line, line.roll(-1, 0)) if closed else (line[:-1], line[1:])
         hit = _point_segment_distance(centres, a, b).min(dim=1).values <= radius  # (N,)
         if closed:
             hit = hit | _inside(centres, line)

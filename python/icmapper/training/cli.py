@@ -11,6 +11,10 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from icmapper.training.config import TrainConfig
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -72,13 +76,11 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def fill_cache(cfg: object, shard_spec: str) -> int:
+def fill_cache(cfg: TrainConfig, shard_spec: str) -> int:
     """``--fill-cache I/N``: renders data.source's frames into data.cache_dir."""
     from icmapper.data.datasets import ImageCache
     from icmapper.data.sources import open_source
-    from icmapper.training.config import TrainConfig
 
-    assert isinstance(cfg, TrainConfig)
     try:
         shard, num = (int(v) for v in shard_spec.split("/"))
     except ValueError:

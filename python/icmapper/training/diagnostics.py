@@ -23,7 +23,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from icmapper.data.types import CLASS_NAMES, PerceptionRange
+from icmapper.data.types import CLASS_NAMES, NUM_INSTANCE_POINTS, PerceptionRange
 from icmapper.models.config import ModelConfig
 from icmapper.models.decoder import MapDecoder
 from icmapper.models.losses import DetectionCriterion, repeat_targets
@@ -59,10 +59,16 @@ def _frames(spec: str, rng: PerceptionRange, seed: int) -> list[list]:
     return [sequence_gt(s, rng) for s in open_source(spec, seed=seed, render=False)]
 
 
+def _points(g: object) -> torch.Tensor:
+    """(G, P, 2) float32 ego-frame points of a FrameGT (also when it holds no instance)."""
+    pts = np.asarray(g.points, np.float32)  # type: ignore[attr-defined]
+    return torch.as_tensor(pts.reshape(-1, NUM_INSTANCE_POINTS, 2))
+
+
 def _masks(frames: list, cfg: ModelConfig, rng: PerceptionRange) -> torch.Tensor:
     """(B, K, X, Y) rasterised GT of FrameGTs."""
     return torch.stack([
-        rasterise(torch.as_tensor(np.asarray(g.points, np.float32).reshape(-1, 20, 2)),
+        rasterise(_points(g),
                   torch.as_tensor(np.asarray(g.classes, np.int64)), cfg.bev_x, cfg.bev_y,
                   rng.half_x, rng.half_y, cfg.num_classes)
         for g in frames
@@ -73,7 +79,7 @@ def _targets(frames: list, rng: PerceptionRange) -> list[dict]:
     half = torch.tensor([rng.half_x, rng.half_y])
     out = []
     for g in frames:
-        pts = torch.as_tensor(np.asarray(g.points, np.float32).reshape(-1, 20, 2))
+        pts = _points(g)
         out.append({"classes": torch.as_tensor(np.asarray(g.classes, np.int64)),
                     "points01": (pts / half + 1) / 2, "ids": torch.as_tensor(g.ids)})  # fmt: skip
     return out
