@@ -77,3 +77,37 @@ def test_bad_seed() -> None:
         generate_city(-1)
     with pytest.raises(TypeError, match="seed"):
         generate_city("3")  # type: ignore[arg-type]
+
+
+def _digest(seed: int, varied: bool = False) -> str:
+    import hashlib
+
+    h = hashlib.sha256()
+    w = generate_city(seed, varied)
+    for m in w.instances:
+        h.update(np.asarray(m.points, np.float64).tobytes())
+        h.update(f"{m.id} {int(m.cls)} {m.style}".encode())
+    return h.hexdigest()[:16]
+
+
+def test_varied_cities(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The real-road variety (domain randomisation) draws from its own stream, so the plain
+    cities (the benchmark's) stay as they were; it gives wider roads with fewer dividers
+    (shoulders and unmarked lanes), deterministically."""
+    from icmapper.data.sim import city
+
+    assert _digest(6037, varied=True) == _digest(6037, varied=True) != _digest(6037)
+    with monkeypatch.context() as m:  # without the variety itself, the same city comes out
+        m.setattr(city, "_vary_street", lambda st, rng: st)
+        assert _digest(6037, varied=True) == _digest(6037)
+    plain, varied = generate_city(6037), generate_city(6037, varied=True)
+    assert varied.name == "sim-varied-city-6037" and plain.name == "sim-city-6037"
+
+    def count(w, cls):  # noqa: ANN001, ANN202
+        return sum(int(m.cls) == cls for m in w.instances)
+
+    assert count(varied, MapClass.DIVIDER) < count(plain, MapClass.DIVIDER)
+    area = lambda w: sum(Polygon(p).area for p in w.drivable)  # noqa: E731
+    assert area(varied) > 1.05 * area(plain)
+    for m in varied.instances:  # still valid geometry
+        assert np.all(np.isfinite(m.points)) and len(m.points) >= 2

@@ -5,6 +5,9 @@ and errors list the registry.
 
     sim:val            4 synthetic validation drives (cities of sim.CITY_SEEDS["val"])
     sim:<split>:N      N synthetic drives of split train / val / test
+    sim-varied:<split>:N
+                       N synthetic drives of the same cities with real-road variety (wide lanes,
+                       shoulders, unmarked lanes: domain randomisation for training)
     sim-city:<split>:INDEX:N
                        N drives through one synthetic city (city INDEX of the split)
     av2:PATH[:split]   the drive of an Argoverse 2 log, or of every log in a folder of logs (a
@@ -189,6 +192,18 @@ def _open_sim(spec: str, rest: str, o: SourceOptions) -> list[Sequence]:
     return list(sim.sim_sequences(parts[0], n, seed=o.seed, image_size=o.image_size))
 
 
+def _open_sim_varied(spec: str, rest: str, o: SourceOptions) -> list[Sequence]:
+    from icmapper.data import sim
+
+    parts = rest.split(":")
+    if parts[0] not in SIM_SPLITS or len(parts) > 2:
+        raise ValueError(
+            f"bad source spec {spec!r}: expected sim-varied:<{'|'.join(SIM_SPLITS)}>[:N]"
+        )
+    n = _count(parts[1], spec) if len(parts) == 2 else DEFAULT_SIM_COUNT
+    return list(sim.sim_sequences(parts[0], n, seed=o.seed, image_size=o.image_size, varied=True))
+
+
 def _split_arg(spec: str, rest: str, o: SourceOptions) -> tuple[Path, str | None, Path | None]:
     """PATH[:split] -> (path, split, split file): a split needs `split_file` or PATH/splits.json."""
     path, split = rest, None
@@ -277,6 +292,15 @@ def _open_nuscenes(spec: str, rest: str, o: SourceOptions) -> list[Sequence]:
 
 register_source(
     SourceKind("sim", "sim:<split>[:N]", "N synthetic drives (split train|val|test)", _open_sim)
+)
+register_source(
+    SourceKind(
+        "sim-varied",
+        "sim-varied:<split>[:N]",
+        "N synthetic drives of cities with real-road variety (wide lanes, shoulders, unmarked "
+        "lanes; for training)",
+        _open_sim_varied,
+    )
 )
 register_source(
     SourceKind(

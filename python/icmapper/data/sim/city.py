@@ -9,6 +9,14 @@ closing of the meeting street bodies); dividers stop before the junction and its
 Road boundaries are the rings of the union of the drivable pieces (outer kerbs, block kerbs,
 medians). Lanes (centrelines + successors, turning lanes through junctions) let an ego drive.
 
+With ``varied=True`` (domain randomisation towards real road geometry, for training) streets also
+draw, from a separate random stream so that the plain cities of a seed stay as they are: lane
+widths up to 5.5 m, a paved shoulder (0.5-3 m of asphalt between the outer lane and the kerb,
+as on roads with parking or bike lanes), and streets whose lanes of one direction are not marked
+(no lane dividers, only the centre line). Real logs (Argoverse 2) have all three; the plain
+generator has none, and a detector trained on it draws a divider every 3-4 m and pulls the kerbs
+in towards them.
+
 This module only builds geometry; it holds no I/O and no rendering.
 """
 
@@ -56,6 +64,8 @@ class _Street:
     median: float  # raised median width (m), 0 when none
     centre_style: str  # style of the centre divider when there is no median
     lane_style: str  # style of the dividers between lanes of one direction
+    shoulder: float = 0.0  # paved shoulder (m) between the outer lanes and the kerbs
+    marked: bool = True  # lane dividers between lanes of one direction
 
     @property
     def length(self) -> float:
@@ -63,11 +73,11 @@ class _Street:
 
     @property
     def hw_right(self) -> float:
-        return self.median / 2 + self.n_fwd * self.width
+        return self.median / 2 + self.n_fwd * self.width + self.shoulder
 
     @property
     def hw_left(self) -> float:
-        return self.median / 2 + self.n_bwd * self.width
+        return self.median / 2 + self.n_bwd * self.width + self.shoulder
 
     def direction_at(self, node: int) -> NDArray[np.float64]:
         """Unit vector (2,) pointing from `node` (a or b) into the street."""
@@ -160,12 +170,22 @@ def _make_street(rng: np.random.Generator, a: int, b: int, nodes: NDArray) -> _S
     return _Street(a, b, curve, n_fwd, n_bwd, width, median, centre, lane_style)
 
 
+def _vary_street(st: _Street, rng: np.random.Generator) -> _Street:
+    """``st`` with the real-road variety of ``generate_city(varied=True)`` (module docstring)."""
+    from dataclasses import replace
+
+    width = float(rng.uniform(2.9, 5.5)) if rng.random() < 0.6 else st.width
+    shoulder = float(rng.uniform(0.5, 3.0)) if rng.random() < 0.5 else 0.0
+    return replace(st, width=width, shoulder=shoulder, marked=bool(rng.random() >= 0.35))
+
+
 def _dashed(style: str) -> bool:
     return style.startswith("dashed")
 
 
-def generate_city(seed: int) -> WorldMap:
-    """Builds the synthetic city of `seed` (same seed, same city).
+def generate_city(seed: int, varied: bool = False) -> WorldMap:
+    """Builds the synthetic city of `seed` (same seed, same city; ``varied``: with the real-road
+    variety of the module docstring, named "sim-varied-city-<seed>").
 
     Returns a WorldMap named "sim-city-<seed>" with map instances (ids 1..N, unique and stable for
     the seed; dividers, crossings, then boundaries), drivable pieces (simple polygons (n, 2) whose
@@ -176,6 +196,9 @@ def generate_city(seed: int) -> WorldMap:
     rng = np.random.default_rng([seed, 0x5C17])
     nodes, edges = _grid_graph(rng)
     streets = [_make_street(rng, a, b, nodes) for a, b in edges]
+    if varied:
+        vary = np.random.default_rng([seed, 0xD1CE])  # own stream: plain cities stay unchanged
+        streets = [_vary_street(st, vary) for st in streets]
     corner_r = float(rng.uniform(4.0, 9.0))  # kerb radius at junction corners
 
     # Junction radius per node: far enough along each arm that the arms no longer touch.
@@ -231,7 +254,7 @@ def generate_city(seed: int) -> WorldMap:
             for s0, s1 in spans:
                 add(MapClass.DIVIDER, sub_curve(st.curve, s0, s1), st.centre_style)
         for side, n_lanes in ((-1.0, st.n_fwd), (1.0, st.n_bwd)):
-            for k in range(1, n_lanes):
+            for k in range(1, n_lanes if st.marked else 1):
                 off = side * (st.median / 2 + k * st.width)
                 for s0, s1 in spans:
                     add(
@@ -290,7 +313,8 @@ def generate_city(seed: int) -> WorldMap:
             add(MapClass.BOUNDARY, pts, "curb")
 
     drivable = [np.asarray(p.exterior.coords, np.float64)[:-1] for p in pieces if p.area > 0.5]
-    return WorldMap(f"sim-city-{seed}", instances, drivable, lanes)
+    name = f"sim-varied-city-{seed}" if varied else f"sim-city-{seed}"
+    return WorldMap(name, instances, drivable, lanes)
 
 
 def _spans(s0: float, s1: float, gaps: list[tuple[float, float]]) -> list[tuple[float, float]]:

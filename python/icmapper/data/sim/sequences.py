@@ -21,13 +21,15 @@ def sim_sequence(
     drive_seed: int,
     image_size: tuple[int, int] = (128, 352),
     world: WorldMap | None = None,
+    varied: bool = False,
 ) -> Sequence:
     """The drive `drive_seed` through city `city_seed` as a Sequence named "sim-<city>-<drive>"
-    (source "sim"). `render(i)` gives frame i's images (C, 3, H, W) uint8; one Renderer is made
-    per sequence and paints its world raster on the first frame. `world` lets callers pass the
-    already generated city of `city_seed` (it must be that city)."""
+    ("sim-varied-<city>-<drive>" in the ``varied`` city) (source "sim"). `render(i)` gives frame
+    i's images (C, 3, H, W) uint8; one Renderer is made per sequence and paints its world raster on
+    the first frame. `world` lets callers pass the already generated city of `city_seed` (it must
+    be that city)."""
     if world is None:
-        world = generate_city(city_seed)
+        world = generate_city(city_seed, varied)
     timestamps, poses = drive(world, drive_seed)
     rig = nuscenes_rig(image_size)
     renderer = Renderer(
@@ -41,15 +43,21 @@ def sim_sequence(
             poses[i], frame_seed=_frame_seed(city_seed, drive_seed, i), t=float(timestamps[i])
         )
 
-    return Sequence(f"sim-{city_seed}-{drive_seed}", "sim", world, timestamps, poses, rig, render)
+    name = f"sim-varied-{city_seed}-{drive_seed}" if varied else f"sim-{city_seed}-{drive_seed}"
+    return Sequence(name, "sim", world, timestamps, poses, rig, render)
 
 
 def sim_sequences(
-    split: str, num: int, seed: int = 0, image_size: tuple[int, int] = (128, 352)
+    split: str,
+    num: int,
+    seed: int = 0,
+    image_size: tuple[int, int] = (128, 352),
+    varied: bool = False,
 ) -> list[Sequence]:
     """`num` deterministic sequences of `split` ("train" | "val" | "test"): city seeds drawn from
     the split's range with `seed` (without repeats while the split has enough cities), one drive
-    each (drive seed = position in the list). Each city is generated once."""
+    each (drive seed = position in the list). Each city is generated once (``varied``: the cities
+    with real-road variety, ``generate_city``)."""
     if split not in CITY_SEEDS:
         raise ValueError(f"unknown split {split!r}; expected one of {sorted(CITY_SEEDS)}")
     if num < 0:
@@ -62,8 +70,8 @@ def sim_sequences(
     for k, p in enumerate(picks):
         city = cities[int(p)]
         if city not in worlds:
-            worlds[city] = generate_city(city)
-        out.append(sim_sequence(city, k, image_size, world=worlds[city]))
+            worlds[city] = generate_city(city, varied)
+        out.append(sim_sequence(city, k, image_size, world=worlds[city], varied=varied))
     return out
 
 
