@@ -72,6 +72,28 @@ def test_from_checkpoint_takes_the_fusion_networks_history(tiny_checkpoint: Path
     assert Mapper.from_checkpoint(tiny_checkpoint, config=cfg).config.min_hits == 4
 
 
+def test_checkpoint_carries_mapper_settings(tiny_checkpoint: Path, tmp_path: Path) -> None:
+    """The training config's [mapper] table travels in the checkpoint and is the mapper's
+    starting point (configs/small.toml sets min_hits = 1); --set still overrides it."""
+    from icmapper.cli import main
+    from icmapper.models.network import checkpoint_mapper_settings
+    from icmapper.training.config import config_from_dict
+
+    assert checkpoint_mapper_settings(tiny_checkpoint) == {"min_hits": 1}
+    assert Mapper.from_checkpoint(tiny_checkpoint).config.min_hits == 1
+    assert MapperConfig().min_hits == 2  # the library default is unchanged
+    with pytest.raises(ValueError, match="unknown"):
+        config_from_dict({"mapper": {"min_hitz": 1}})
+    with pytest.raises(ValueError, match=r"\[mapper\] must be a table"):
+        config_from_dict({"mapper": 3})
+    src = ["--source", "sim:val:1", "--checkpoint", str(tiny_checkpoint)]
+    for extra, want in (([], 1), (["--set", "min_hits=3"], 3)):
+        out = tmp_path / f"run{want}"
+        assert main(["map", *src, "--out", str(out), "--no-progress", *extra]) == 0
+        used = json.loads((out / "icmapper" / "mapper_config.json").read_text())
+        assert used["min_hits"] == want
+
+
 def test_method_registry() -> None:
     names = list(methods())
     assert names[0] == "icmapper" and {"post-track", "vma", "cluster-fit", "polymerge"} <= set(

@@ -38,15 +38,19 @@ def _image_size(args: argparse.Namespace) -> tuple[int, int]:
 
 def mapper_config(args: argparse.Namespace) -> MapperConfig:
     """The run's ``MapperConfig``: the defaults (with the learned detector, its checkpoint's
-    detection threshold), then the named flags, then ``--set NAME=VALUE`` items."""
+    detection threshold and ``[mapper]`` settings), then the named flags, then ``--set NAME=VALUE``
+    items."""
     from icmapper.mapping.config import CLI_FLAGS, MapperConfig
     from icmapper.settings import parse_assignments
 
     base = MapperConfig()
     if args.detections == "learned" and args.checkpoint:
-        from icmapper.models.network import checkpoint_threshold
+        from icmapper.models.network import checkpoint_mapper_settings, checkpoint_threshold
 
-        base = MapperConfig(detect_threshold=checkpoint_threshold(args.checkpoint))
+        base = MapperConfig.from_dict(
+            checkpoint_mapper_settings(args.checkpoint),
+            MapperConfig(detect_threshold=checkpoint_threshold(args.checkpoint)),
+        )
     table: dict[str, Any] = {
         name: getattr(args, name) for name in CLI_FLAGS if getattr(args, name) is not None
     }

@@ -108,6 +108,15 @@ def checkpoint_settings(path: str | Path) -> tuple[PerceptionRange, tuple[int, i
     return rng, image_size
 
 
+def checkpoint_mapper_settings(path: str | Path) -> dict[str, Any]:
+    """The mapper settings a checkpoint carries (its training config's ``[mapper]`` table, as
+    chosen on validation for this network; empty when it has none)."""
+    table = load_checkpoint(path)["config"].get("mapper", {})
+    if not isinstance(table, dict):
+        raise ValueError(f"checkpoint {path}: config [mapper] must be a table")
+    return dict(table)
+
+
 def checkpoint_threshold(path: str | Path) -> float:
     """The detection score threshold a checkpoint was trained with."""
     blob = load_checkpoint(path)

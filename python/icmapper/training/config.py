@@ -30,6 +30,8 @@ class DataConfig:
     num_workers: int = 0
     #: On-disk image cache folder (icmapper.data.datasets.ImageCache), "" for none; one per size.
     cache_dir: str = ""
+    #: Folder of the BEV cache of ``stage1.freeze_encoder`` runs, "" for OUT/bev-cache.
+    bev_cache_dir: str = ""
     #: Split file for a source spec naming a split ("nuscenes:PATH:train"), "" for PATH/splits.json.
     split_file: str = ""
 
@@ -54,6 +56,9 @@ class Stage1Config:
     #: one-to-many matching (needs model.aux_queries > 0): GT repeats and the loss weight
     one_to_many_repeats: int = 6
     one_to_many_weight: float = 1.0
+    #: train the decoder, query propagation and association on cached BEVs of a frozen encoder
+    #: taken from ``--init`` (``icmapper.training.bevcache``); the segmentation loss is off
+    freeze_encoder: bool = False
 
 
 @dataclass(frozen=True)
@@ -87,6 +92,10 @@ class TrainConfig:
     data: DataConfig = field(default_factory=DataConfig)
     stage1: Stage1Config = field(default_factory=Stage1Config)
     stage2: Stage2Config = field(default_factory=Stage2Config)
+    #: The ``[mapper]`` table: ``MapperConfig`` settings chosen on validation for this network
+    #: (e.g. ``min_hits``). Stored in the checkpoint; ``icmapper map`` / ``compare`` and
+    #: ``Mapper.from_checkpoint`` start from them (``--set`` still overrides).
+    mapper: dict[str, Any] = field(default_factory=dict)
 
     @property
     def perception_range(self) -> PerceptionRange:
@@ -135,13 +144,17 @@ def _validate(cfg: TrainConfig) -> None:
 
 def config_from_dict(raw: dict[str, Any]) -> TrainConfig:
     """Builds and validates a config from a (TOML-shaped) dict."""
-    top = {k: v for k, v in raw.items() if k not in _TABLES}
-    for name in _TABLES:
+    from icmapper.mapping.config import MapperConfig
+
+    top = {k: v for k, v in raw.items() if k not in (*_TABLES, "mapper")}
+    for name in (*_TABLES, "mapper"):
         if name in raw and not isinstance(raw[name], dict):
             raise ValueError(f"config [{name}] must be a table")
     tables = {name: from_table(cls, raw.get(name, {}), name) for name, cls in _TABLES.items()}
+    mapper = dict(raw.get("mapper", {}))
+    MapperConfig.from_dict(mapper)  # unknown names and wrong types fail here, not at inference
     base = from_table(TrainConfig, top, "top level") if top else TrainConfig()
-    cfg = dataclasses.replace(base, **tables)
+    cfg = dataclasses.replace(base, **tables, mapper=mapper)
     _validate(cfg)
     return cfg
 
@@ -155,7 +168,7 @@ def apply_overrides(raw: dict[str, Any], overrides: dict[str, Any]) -> dict[str,
         table, dot, key = name.rpartition(".")
         if not dot:
             out[key] = value
-        elif table in _TABLES:
+        elif table in _TABLES or table == "mapper":
             out.setdefault(table, {})[key] = value
         else:
             raise ValueError(
