@@ -166,3 +166,26 @@ def test_one_to_many_queries_train_only_and_isolated() -> None:
     hybrid.eval()
     c = hybrid(bev, prop_q, prop_p)
     assert c.aux_logits is None and c.logits[-1].shape == (2, 6, 3)
+
+
+def test_point_refinement_moves_points_by_their_own_evidence() -> None:
+    """With ``point_refine`` each point gets a correction from the BEV around it: the layer
+    samples a 3x3 neighbourhood, and the gradient of one point's feature reaches the BEV only
+    near that point."""
+    from icmapper.models.decoder import MapDecoder
+
+    torch.manual_seed(0)
+    dec = MapDecoder(16, 4, 2, num_points=20, heads=4, point_refine=True, grid=(10, 8))
+    assert dec.layers[0].neighbourhood.shape == (9, 2)
+    bev = torch.randn(1, 16, 10, 8, requires_grad=True)
+    out = dec(bev)
+    assert out.points[-1].shape == (1, 4, 20, 2)
+    # one point of one query of the first layer: its point-head correction reads the BEV near it
+    feats = dec.layers[0](dec.query[None, :4], dec.point_embed(torch.sigmoid(dec.ref[None, :4])
+                          .flatten(2)), bev, torch.sigmoid(dec.ref[None, :4]))[1]  # fmt: skip
+    assert feats.shape == (1, 4, 20, 16)
+    (grad,) = torch.autograd.grad(feats[0, 0, 0].sum(), bev)
+    touched = (grad.abs().sum(1)[0] > 0).nonzero()  # (n, 2) BEV cells
+    assert 0 < len(touched) <= 16  # the 3x3 cells around the point (bilinear: up to 4x4)
+    plain = MapDecoder(16, 4, 2, num_points=20, heads=4)
+    assert sum(p.numel() for p in dec.parameters()) > sum(p.numel() for p in plain.parameters())

@@ -128,13 +128,19 @@ class NetworkDetector:
                 motion = torch.as_tensor(m, dtype=torch.float32, device=dev)[None]
                 state = self._state
             out, new_state = self.detector(images, intr, c2e, state, motion)
-            scores = out.scores()[0]  # (Q,)
-            classes = out.classes()[0]  # (Q,)
-            points = self.detector.to_metres(out.points[-1][0])  # (Q, P, 2) ego metres
-            queries = out.queries[0]  # (Q, C)
+            if self.detector.cfg.instances == "segmentation":
+                inst, queries = self.detector.segment_instances(out.bev)  # (N, C)
+                scores = torch.as_tensor(inst.scores, device=dev)  # (N,)
+                classes = torch.as_tensor(inst.classes, device=dev)  # (N,)
+                points = torch.as_tensor(inst.points, device=dev)  # (N, P, 2) ego metres
+            else:
+                scores = out.scores()[0]  # (Q,)
+                classes = out.classes()[0]  # (Q,)
+                points = self.detector.to_metres(out.points[-1][0])  # (Q, P, 2) ego metres
+                queries = out.queries[0]  # (Q, C)
         if self.temporal:
             self._state, self._prev_pose = new_state, pose
-        order = torch.argsort(scores, descending=True)
+        order = torch.argsort(scores, descending=True, stable=True)
         return Detections(
             classes=classes[order].cpu().numpy().astype(np.int64),
             scores=scores[order].cpu().numpy().astype(np.float32),

@@ -7,6 +7,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+#: The values of ``ModelConfig.instances``.
+INSTANCE_SOURCES = ("decoder", "segmentation")
+
 
 @dataclass(frozen=True)
 class ModelConfig:
@@ -36,6 +39,11 @@ class ModelConfig:
     seg_head: bool = False  # dense BEV segmentation head (auxiliary training target, MapTRv2)
     #: extra decoder queries for one-to-many matching (MapTRv2's hybrid matching; training only)
     aux_queries: int = 0
+    #: per-point refinement from each point's 3x3 BEV neighbourhood (``models.decoder``)
+    point_refine: bool = False
+    #: where inference takes the instances from: "decoder" (the set decoder's queries) or
+    #: "segmentation" (the dense head's masks, vectorised: ``models.vectorise``; needs seg_head)
+    instances: str = "decoder"
 
     def __post_init__(self) -> None:
         positive = (
@@ -55,6 +63,12 @@ class ModelConfig:
             raise ValueError(
                 "model.backbone_widths and backbone_depths must have equal length >= 2"
             )
+        if self.instances not in INSTANCE_SOURCES:
+            raise ValueError(
+                f"model.instances must be one of {INSTANCE_SOURCES}, got {self.instances!r}"
+            )
+        if self.instances == "segmentation" and not self.seg_head:
+            raise ValueError('model.instances = "segmentation" needs model.seg_head = true')
         if self.aux_queries < 0:
             raise ValueError(f"model.aux_queries must be >= 0, got {self.aux_queries}")
         if self.bev_neck < 0:

@@ -11,6 +11,13 @@ extra queries that run beside the Q main ones in training only, in their own sel
 (``DecoderOutput.aux_logits`` / ``aux_points``) are matched to the ground truth repeated several
 times (``losses.DetectionCriterion`` with repeated targets), giving the decoder many more positive
 samples per frame. Inference runs the Q main queries only.
+
+Per-point refinement (``point_refine``, after MapTR's point-level queries): the regression head sees
+only the query vector, which pools its P points into one feature, so a point cannot be placed from
+the evidence at its own location. With ``point_refine`` every layer also samples a 3x3
+neighbourhood of BEV cells around each point (a fixed-offset deformable attention), and a per-point
+head turns that local feature (plus the query and the point's index) into a correction of that
+point alone, added to the query-level regression.
 """
 
 from __future__ import annotations
@@ -56,12 +63,23 @@ class DecoderOutput:
 class DecoderLayer(nn.Module):
     """One decoder layer (self-attention, BEV point sampling, FFN)."""
 
-    def __init__(self, channels: int, num_points: int, heads: int) -> None:
+    def __init__(
+        self,
+        channels: int,
+        num_points: int,
+        heads: int,
+        neighbourhood: torch.Tensor | None = None,
+    ) -> None:
+        """``neighbourhood`` (S, 2) offsets in [0, 1] units: sample S points around each point and
+        return a per-point feature (``point_refine``); None samples each point once."""
         super().__init__()
         self.self_attn = nn.MultiheadAttention(channels, heads, batch_first=True)
         self.norm1 = nn.LayerNorm(channels)
         self.point_weights = nn.Linear(channels, num_points)
-        self.value = nn.Linear(channels, channels)
+        s = 1 if neighbourhood is None else neighbourhood.shape[0]
+        self.value = nn.Linear(s * channels, channels)
+        self.neighbourhood: torch.Tensor | None
+        self.register_buffer("neighbourhood", neighbourhood, persistent=False)
         self.out = nn.Linear(channels, channels)
         self.norm2 = nn.LayerNorm(channels)
         self.ffn = mlp(channels, 2 * channels, channels)
@@ -74,17 +92,22 @@ class DecoderLayer(nn.Module):
         bev: torch.Tensor,
         points: torch.Tensor,
         attn_mask: torch.Tensor | None = None,
-    ) -> torch.Tensor:
+    ) -> tuple[torch.Tensor, torch.Tensor]:
         """q, pos (B, Q, C); bev (B, C, X, Y); points (B, Q, P, 2) in [0, 1]; attn_mask (Q, Q)
-        bool, True where a query may not attend -> (B, Q, C)."""
+        bool, True where a query may not attend -> queries (B, Q, C), point features
+        (B, Q, P, C)."""
         qp = q + pos
         att = self.self_attn(qp, qp, q, need_weights=False, attn_mask=attn_mask)[0]
         q = self.norm1(q + att)  # (B, Q, C)
-        feats = self.value(sample_bev(bev, points))  # (B, Q, P, C)
+        if self.neighbourhood is None:
+            feats = self.value(sample_bev(bev, points))  # (B, Q, P, C)
+        else:
+            around = points[..., None, :] + self.neighbourhood  # (B, Q, P, S, 2)
+            feats = self.value(sample_bev(bev, around).flatten(-2))  # (B, Q, P, S*C) -> C
         w = torch.softmax(self.point_weights(q + pos), dim=-1)  # (B, Q, P)
         agg = torch.einsum("bqp,bqpc->bqc", w, feats)  # (B, Q, C)
         q = self.norm2(q + self.out(agg))
-        return self.norm3(q + self.ffn(q))  # (B, Q, C)
+        return self.norm3(q + self.ffn(q)), feats  # (B, Q, C), (B, Q, P, C)
 
 
 class MapDecoder(nn.Module):
@@ -102,7 +125,10 @@ class MapDecoder(nn.Module):
         heads: int = 4,
         shared_reg: bool = True,
         aux_queries: int = 0,
+        point_refine: bool = False,
+        grid: tuple[int, int] = (50, 25),
     ) -> None:
+        """``grid`` (X, Y): the BEV's cells, the step of ``point_refine``'s neighbourhood."""
         super().__init__()
         self.num_queries, self.num_points, self.num_classes = num_queries, num_points, num_classes
         self.num_layers_ = num_layers
@@ -110,8 +136,13 @@ class MapDecoder(nn.Module):
         total = num_queries + aux_queries
         self.query = nn.Parameter(torch.randn(total, channels) * 0.02)  # (Q + A, C)
         self.ref = nn.Parameter(torch.randn(total, num_points, 2) * 0.5)  # logits of points
+        hood = None
+        if point_refine:  # the 3x3 cells around a point, in [0, 1] units
+            step = torch.tensor([1.0 / grid[0], 1.0 / grid[1]])
+            d = torch.tensor([-1.0, 0.0, 1.0])
+            hood = torch.cartesian_prod(d, d) * step  # (9, 2)
         self.layers = nn.ModuleList(
-            [DecoderLayer(channels, num_points, heads) for _ in range(num_layers)]
+            [DecoderLayer(channels, num_points, heads, hood) for _ in range(num_layers)]
         )
         self.point_embed = mlp(num_points * 2, channels, channels)
         self.cls_heads = nn.ModuleList(
@@ -125,6 +156,15 @@ class MapDecoder(nn.Module):
             for head in self.reg_heads:
                 head[-1].weight.mul_(0.01)
                 nn.init.zeros_(head[-1].bias)
+        self.point_heads: nn.ModuleList | None = None
+        if point_refine:
+            self.point_index = nn.Parameter(torch.randn(num_points, channels) * 0.02)  # (P, C)
+            self.point_norm = nn.LayerNorm(channels)
+            self.point_heads = nn.ModuleList([mlp(channels, channels, 2) for _ in range(n_reg)])
+            with torch.no_grad():
+                for head in self.point_heads:
+                    head[-1].weight.mul_(0.01)
+                    nn.init.zeros_(head[-1].bias)
         for head in self.cls_heads:  # focal-loss prior: p = 0.01
             nn.init.constant_(head.bias, -4.595)
 
@@ -132,12 +172,24 @@ class MapDecoder(nn.Module):
         """The regression head of decoder layer ``layer``."""
         return self.reg_heads[min(layer, len(self.reg_heads) - 1)]
 
-    def refine(self, layer: int, q: torch.Tensor, points: torch.Tensor) -> torch.Tensor:
+    def refine(
+        self,
+        layer: int,
+        q: torch.Tensor,
+        points: torch.Tensor,
+        point_feats: torch.Tensor | None = None,
+    ) -> torch.Tensor:
         """Points after the regression head of ``layer``.
 
-        q (B, Q, C), points (B, Q, P, 2) in [0, 1] -> (B, Q, P, 2) in [0, 1].
+        q (B, Q, C), points (B, Q, P, 2) in [0, 1], point_feats (B, Q, P, C) the layer's
+        features at ``points`` (``point_refine``; None: the query-level regression only)
+        -> (B, Q, P, 2) in [0, 1].
         """
         delta = self.reg_head(layer)(q).reshape(*q.shape[:-1], self.num_points, 2)  # (B, Q, P, 2)
+        if self.point_heads is not None and point_feats is not None:
+            head = self.point_heads[min(layer, len(self.point_heads) - 1)]
+            local = self.point_norm(point_feats) + q[..., None, :] + self.point_index
+            delta = delta + head(local)  # (B, Q, P, 2)
         return torch.sigmoid(inverse_sigmoid(points) + delta)
 
     def forward(
@@ -165,8 +217,8 @@ class MapDecoder(nn.Module):
         for i, layer in enumerate(self.layers):
             pos = self.point_embed(points.flatten(2))  # (B, Q + A, C)
             base = points if i == 0 else points.detach()  # refine from the detached reference
-            q = layer(q, pos, bev, base.detach(), mask)  # (B, Q + A, C)
-            points = self.refine(i, q, base)  # (B, Q + A, P, 2)
+            q, feats = layer(q, pos, bev, base.detach(), mask)  # (B, Q + A, C), (.., P, C)
+            points = self.refine(i, q, base, feats)  # (B, Q + A, P, 2)
             logits.append(self.cls_heads[i](q))  # (B, Q + A, K)
             all_points.append(points)
         if not aux:

@@ -14,11 +14,12 @@ from torch import nn
 
 from icmapper.data.types import PerceptionRange, RANGE_60x30
 from icmapper.models.backbone import ResNetBackbone
-from icmapper.models.bev import BevNeck, TemporalMemory, ViewTransformer
+from icmapper.models.bev import BevNeck, TemporalMemory, ViewTransformer, sample_bev
 from icmapper.models.config import ModelConfig
 from icmapper.models.decoder import MapDecoder
 from icmapper.models.propagation import QueryPropagation, select_topk
 from icmapper.models.segmentation import SegHead
+from icmapper.models.vectorise import VectorInstances, VectoriseParams, vectorise
 
 
 @dataclass
@@ -101,6 +102,8 @@ class MapDetector(nn.Module):
             s.heads,
             s.shared_reg,
             s.aux_queries,
+            s.point_refine,
+            (s.bev_x, s.bev_y),
         )
         self.propagation = QueryPropagation(s.channels, hx, hy)
         self.register_buffer("pix_mean", torch.tensor([0.45, 0.45, 0.45]).view(1, 3, 1, 1), False)
@@ -135,15 +138,29 @@ class MapDetector(nn.Module):
         intrinsics: torch.Tensor,
         cam_to_ego: torch.Tensor,
         image_size: tuple[int, int],
-        state: DetectorState | None,
+        prev_bev: torch.Tensor | None,
         prev_to_cur: torch.Tensor | None,
     ) -> torch.Tensor:
-        """BEV (B, C, X, Y) of this frame fused with the warped previous BEV."""
+        """BEV (B, C, X, Y) of this frame fused with the warped previous BEV (B, C, X, Y)."""
         bev = self.neck(self.view(feats, intrinsics, cam_to_ego, image_size))  # (B, C, X, Y)
-        if not self.cfg.temporal or state is None or prev_to_cur is None:
+        if not self.cfg.temporal or prev_bev is None or prev_to_cur is None:
             return self.memory(bev, None, None)
         cur_to_prev = torch.linalg.inv(prev_to_cur.float())  # (B, 4, 4)
-        return self.memory(bev, state.bev, cur_to_prev)
+        return self.memory(bev, prev_bev, cur_to_prev)
+
+    def encode(
+        self,
+        images: torch.Tensor,
+        intrinsics: torch.Tensor,
+        cam_to_ego: torch.Tensor,
+        prev_bev: torch.Tensor | None = None,
+        prev_to_cur: torch.Tensor | None = None,
+    ) -> torch.Tensor:
+        """The encoder half of ``forward``: images (B, N_cam, 3, H, W) -> fused BEV (B, C, X, Y)
+        (``prev_bev``: the previous frame's fused BEV, None at a sequence start)."""
+        image_size = (int(images.shape[-2]), int(images.shape[-1]))
+        feats = self.image_features(images)  # (B, N, C, h, w)
+        return self.bev_features(feats, intrinsics, cam_to_ego, image_size, prev_bev, prev_to_cur)
 
     def forward(
         self,
@@ -162,9 +179,20 @@ class MapDetector(nn.Module):
         """
         if state is not None and prev_to_cur is None:
             raise ValueError("prev_to_cur is required when a state is given")
-        image_size = (int(images.shape[-2]), int(images.shape[-1]))
-        feats = self.image_features(images)  # (B, N, C, h, w)
-        bev = self.bev_features(feats, intrinsics, cam_to_ego, image_size, state, prev_to_cur)
+        prev_bev = state.bev if state is not None else None
+        bev = self.encode(images, intrinsics, cam_to_ego, prev_bev, prev_to_cur)
+        return self.decode(bev, state, prev_to_cur)
+
+    def decode(
+        self,
+        bev: torch.Tensor,
+        state: DetectorState | None = None,
+        prev_to_cur: torch.Tensor | None = None,
+    ) -> tuple[DetectorOutput, DetectorState]:
+        """The decoder half of ``forward``: a fused BEV (B, C, X, Y) (``encode``) -> the
+        detections and the state for the next frame (training on cached BEVs starts here)."""
+        if state is not None and prev_to_cur is None:
+            raise ValueError("prev_to_cur is required when a state is given")
         prop_q = prop_p = trans = src = None
         k = 0
         if self.cfg.propagate and state is not None and prev_to_cur is not None:
@@ -186,6 +214,25 @@ class MapDetector(nn.Module):
             aux_points=dec.aux_points,
         )
         return out, self.next_state(out)
+
+    @torch.no_grad()
+    def segment_instances(
+        self, bev: torch.Tensor, params: VectoriseParams | None = None
+    ) -> tuple[VectorInstances, torch.Tensor]:
+        """Instances of one frame from the segmentation head (``model.instances =
+        "segmentation"``): bev (1, C, X, Y) -> the vectorised instances (ego metres) and their
+        embeddings (N, C) (``instance_embedding``)."""
+        if self.seg is None:
+            raise ValueError("the detector has no segmentation head (model.seg_head)")
+        prob = self.seg(bev)[0].float().sigmoid().cpu().numpy()  # (K, X, Y)
+        inst = vectorise(prob, self.rng.half_x, self.rng.half_y, params)
+        pts = torch.as_tensor(inst.points, device=bev.device)  # (N, P, 2) metres
+        return inst, self.instance_embedding(bev, pts[None])[0]
+
+    def instance_embedding(self, bev: torch.Tensor, points_m: torch.Tensor) -> torch.Tensor:
+        """The BEV features averaged along each instance: bev (B, C, X, Y), points_m (B, N, P, 2)
+        ego metres -> (B, N, C) (the association's query of a vectorised instance)."""
+        return sample_bev(bev, self.to_unit(points_m)).mean(dim=-2)  # (B, N, C)
 
     def next_state(self, out: DetectorOutput) -> DetectorState:
         """State for the next frame: the BEV and the top-k queries (by score) of ``out``."""

@@ -44,7 +44,7 @@ class PerfectBev(nn.Module):
         self.pos = nn.Parameter(torch.randn(1, c, cfg.bev_x, cfg.bev_y) * 0.02)  # (1, C, X, Y)
         self.decoder = MapDecoder(
             c, cfg.num_queries, cfg.num_layers, cfg.num_points, cfg.num_classes, cfg.heads,
-            cfg.shared_reg, cfg.aux_queries,
+            cfg.shared_reg, cfg.aux_queries, cfg.point_refine, (cfg.bev_x, cfg.bev_y),
         )  # fmt: skip
 
     def forward(self, masks: torch.Tensor):  # noqa: ANN201 - DecoderOutput

@@ -27,9 +27,19 @@ from torch.utils.data import DataLoader, Dataset
 
 from icmapper.models.checkpoint import load_checkpoint, save_checkpoint
 from icmapper.models.network import ICMapperNet
+from icmapper.training.bevcache import (
+    ENCODER_PARTS,
+    BevClipDataset,
+    collate_bev_clips,
+    encode_sequences,
+)
 from icmapper.training.config import TrainConfig, config_to_dict
 from icmapper.training.distributed import DistInfo, barrier, init_distributed, mean_over_ranks
-from icmapper.training.objectives import Stage1Objective, Stage2Objective
+from icmapper.training.objectives import (
+    SegAssociationObjective,
+    Stage1Objective,
+    Stage2Objective,
+)
 
 
 def param_digest(module: torch.nn.Module) -> str:
@@ -92,6 +102,51 @@ def build_dataset(cfg: TrainConfig, stage: int) -> tuple[Dataset, Any]:
         cache_dir=cfg.data.cache_dir or None,
     )
     return ds, datasets.collate_clips
+
+
+def load_encoder(net: ICMapperNet, path: Path) -> None:
+    """Starts a frozen-encoder run from checkpoint ``path``: its encoder parts
+    (``bevcache.ENCODER_PARTS``) must fit ``net`` (ValueError naming the keys otherwise); every
+    other tensor of the same name and shape is copied too (the rest keeps its fresh
+    initialisation, e.g. a decoder of another architecture)."""
+    state = load_checkpoint(path)["model"]
+    prefixes = tuple(f"detector.{part}." for part in ENCODER_PARTS)
+    own = net.state_dict()
+    keys = [k for k in own if k.startswith(prefixes)]
+    missing = [k for k in keys if k not in state]
+    wrong = [k for k in keys if k in state and state[k].shape != own[k].shape]
+    if missing or wrong:
+        raise ValueError(
+            f"checkpoint {path} does not hold this config's encoder: missing {missing[:3]}, "
+            f"shape mismatch {wrong[:3]}"
+        )
+    fits = {k: v for k, v in state.items() if k in own and v.shape == own[k].shape}
+    net.load_state_dict(fits, strict=False)
+
+
+def bev_dataset(cfg: TrainConfig, net: ICMapperNet, out: Path) -> tuple[Dataset, Any]:
+    """The cached-BEV clips of ``cfg.data.source`` (encoded now where the cache lacks them)."""
+    from icmapper.data.sources import open_source
+
+    seqs = list(
+        open_source(
+            cfg.data.source,
+            image_size=tuple(cfg.data.image_size),
+            seed=cfg.seed,
+            split_file=cfg.data.split_file or None,
+        )
+    )
+    bevs = encode_sequences(
+        net.detector,
+        seqs,
+        cfg.perception_range,
+        cfg.data.bev_cache_dir or out / "bev-cache",
+        tuple(cfg.data.image_size),
+        image_cache=cfg.data.cache_dir or None,
+        log=print,
+    )
+    ds = BevClipDataset(seqs, bevs, cfg.data.clip_len, cfg.perception_range, seed=cfg.seed)
+    return ds, collate_bev_clips
 
 
 def epoch_batches(
@@ -213,7 +268,21 @@ def train(
     elif stage == 2:
         src = Path(init) if init is not None else out / "stage1.pt"
         net.load_state_dict(load_checkpoint(src)["model"])
-    objective: torch.nn.Module = (Stage1Objective if stage == 1 else Stage2Objective)(net, cfg)
+    elif cfg.stage1.freeze_encoder:
+        if init is None:
+            raise ValueError("stage1.freeze_encoder needs --init: the checkpoint of the encoder")
+        load_encoder(net, Path(init))
+    if stage == 1 and cfg.stage1.freeze_encoder:
+        for part in ENCODER_PARTS:
+            module = getattr(net.detector, part)
+            if module is not None:
+                module.requires_grad_(False)
+        if dataset is None:
+            dataset = bev_dataset(cfg, net, out)
+    kind: type[torch.nn.Module] = Stage1Objective if stage == 1 else Stage2Objective
+    if stage == 1 and cfg.stage1.freeze_encoder and cfg.model.instances == "segmentation":
+        kind = SegAssociationObjective  # the instances come from the frozen segmentation head
+    objective = kind(net, cfg)
     objective.train()
     params = [p for p in objective.parameters() if p.requires_grad]
     s1 = cfg.stage1

@@ -53,11 +53,20 @@ def prepare_gt(gt: dict, detector: MapDetector, device: torch.device) -> dict:
 
 
 def check_batch(batch: dict) -> None:
-    """Shape checks of a collated clip batch (clear errors for bad input)."""
+    """Shape checks of a collated clip batch (clear errors for bad input); a batch of cached
+    BEVs (``training.bevcache``) has ``bev`` (B, T, C, X, Y) and no images."""
     img = batch["images"]
-    if img.dim() != 6 or img.shape[3] != 3:
+    if img is None:
+        bev = batch.get("bev")
+        if bev is None or bev.dim() != 5:
+            shape = None if bev is None else tuple(bev.shape)
+            raise ValueError(f"a batch without images needs bev (B, T, C, X, Y), got {shape}")
+        b, t = bev.shape[:2]
+        c = batch["intrinsics"].shape[2]
+    elif img.dim() != 6 or img.shape[3] != 3:
         raise ValueError(f"batch images must be (B, T, C, 3, H, W), got {tuple(img.shape)}")
-    b, t, c = img.shape[:3]
+    else:
+        b, t, c = img.shape[:3]
     expect = {"intrinsics": (b, t, c, 3, 3), "cam_to_ego": (b, t, c, 4, 4), "poses": (b, t, 4, 4)}
     for key, shape in expect.items():
         if tuple(batch[key].shape) != shape:
@@ -123,30 +132,34 @@ class Stage1Objective(nn.Module):
 
     def forward(self, batch: dict) -> dict[str, torch.Tensor]:
         check_batch(batch)
-        dev = batch["images"].device
-        t_len = batch["images"].shape[1]
+        cached = batch["images"] is None  # cached BEVs of a frozen encoder (training.bevcache)
+        first = batch["bev"] if cached else batch["images"]  # (B, T, ...)
+        dev, t_len = first.device, first.shape[1]
         state: DetectorState | None = None
         prev: DetectorOutput | None = None
         prev_matches: list[FrameMatch] | None = None
-        zero = batch["images"].new_zeros((), dtype=torch.float32)
+        zero = first.new_zeros((), dtype=torch.float32)
         l_det, l_trans, l_asso, l_seg, l_o2m = zero, zero, zero, zero, zero
         n_asso = 0
         for t in range(t_len):
             motion = prev_to_cur(batch["poses"], t) if t > 0 else None
-            out, nxt = self.detector(
-                batch["images"][:, t],
-                batch["intrinsics"][:, t],
-                batch["cam_to_ego"][:, t],
-                state,
-                motion,
-            )
+            if cached:
+                out, nxt = self.detector.decode(batch["bev"][:, t], state, motion)
+            else:
+                out, nxt = self.detector(
+                    batch["images"][:, t],
+                    batch["intrinsics"][:, t],
+                    batch["cam_to_ego"][:, t],
+                    state,
+                    motion,
+                )
             gts = [prepare_gt(g[t], self.detector, dev) for g in batch["gt"]]
             det_loss, matches = self.criterion(out.logits, out.points, gts)
             l_det = l_det + det_loss
             if out.aux_logits is not None and out.aux_points is not None:
                 rep = [repeat_targets(g, self.o2m_repeats) for g in gts]
                 l_o2m = l_o2m + self.criterion(out.aux_logits, out.aux_points, rep)[0]
-            if self.seg_weight > 0 and out.seg_logits is not None:
+            if self.seg_weight > 0 and out.seg_logits is not None and not cached:
                 l_seg = l_seg + seg_loss(out.seg_logits, self.seg_targets(gts, out))
             if out.trans_points is not None and out.prop_src is not None and prev_matches:
                 l_trans = l_trans + trans_loss(out.trans_points, out.prop_src, prev_matches, gts)
@@ -168,6 +181,81 @@ class Stage1Objective(nn.Module):
         total = total + self.o2m_weight * l_o2m
         losses = {"loss": total, "det": l_det, "trans": l_trans, "asso": l_asso, "seg": l_seg}
         return {**losses, "o2m": l_o2m} if self.o2m else losses
+
+
+def gt_ids_of(
+    points: torch.Tensor, classes: torch.Tensor, gt: dict, max_dist: float = 1.5
+) -> torch.Tensor:
+    """The GT instance id of each detected instance, -1 for none: one-to-one (Hungarian) on the
+    symmetric Chamfer distance within each class, kept below ``max_dist`` metres.
+
+    points (N, P, 2) ego metres, classes (N,), gt a ``prepare_gt`` dict -> (N,) int64.
+    """
+    from scipy.optimize import linear_sum_assignment
+
+    n, g = points.shape[0], gt["ids"].shape[0]
+    ids = torch.full((n,), -1, dtype=torch.int64)
+    if n == 0 or g == 0:
+        return ids
+    a = points.float().cpu()[:, None, :, None]  # (N, 1, P, 1, 2)
+    b = gt["points"].float().cpu()[None, :, None]  # (1, G, 1, P, 2)
+    dist = (a - b).norm(dim=-1)  # (N, G, P, P)
+    chamfer = 0.5 * (dist.min(dim=-1).values.mean(-1) + dist.min(dim=-2).values.mean(-1))
+    chamfer = chamfer.masked_fill(classes.cpu()[:, None] != gt["classes"].cpu()[None], 1e6)
+    rows, cols = linear_sum_assignment(chamfer.numpy())
+    for r, c in zip(rows.tolist(), cols.tolist(), strict=True):
+        if chamfer[r, c] <= max_dist:
+            ids[r] = gt["ids"].cpu()[c]
+    return ids
+
+
+class SegAssociationObjective(nn.Module):
+    """forward(batch of cached BEVs) -> {'loss', 'asso', 'pairs'}: the association head trained
+    on the instances of the segmentation head (``model.instances = "segmentation"``), the rest
+    frozen. Per sample and frame t > 0: the instances of frames t and t-1 (``segment_instances``)
+    get the ids of the GT they lie on (``gt_ids_of``); the previous frame's instances, moved into
+    the current frame, are the tracks; the loss is L_asso (BCE against the GT match matrix)."""
+
+    def __init__(self, net: ICMapperNet, cfg: TrainConfig) -> None:
+        super().__init__()
+        self.detector = net.detector
+        self.association = net.association
+        self.detector.requires_grad_(False)
+
+    def train(self, mode: bool = True) -> SegAssociationObjective:
+        super().train(mode)
+        self.detector.eval()
+        return self
+
+    def forward(self, batch: dict) -> dict[str, torch.Tensor]:
+        check_batch(batch)
+        if batch["images"] is not None:
+            raise ValueError("the segmentation association trains on cached BEVs (freeze_encoder)")
+        det = self.detector
+        bev = batch["bev"]  # (B, T, C, X, Y)
+        dev = bev.device
+        total = bev.new_zeros(())
+        n_terms, n_pairs = 0, 0
+        for b in range(bev.shape[0]):
+            prev = None
+            for t in range(bev.shape[1]):
+                inst, q = det.segment_instances(bev[b : b + 1, t])  # (N, C)
+                pts = torch.as_tensor(inst.points, device=dev)  # (N, P, 2) metres
+                gt = prepare_gt(batch["gt"][b][t], det, dev)
+                ids = gt_ids_of(pts, torch.as_tensor(inst.classes), gt).to(dev)
+                if prev is not None and len(inst) and prev[0].shape[0]:
+                    motion = prev_to_cur(batch["poses"][b : b + 1], t)  # (1, 4, 4)
+                    p_trk = transform_points(prev[1][None], motion)[0]  # (T, P, 2) metres
+                    logits = self.association(
+                        q[None], det.to_unit(pts)[None], prev[0][None], det.to_unit(p_trk)[None]
+                    )[0]  # (D, T)
+                    target = association_targets(ids, prev[2])
+                    total = total + association_loss(logits, target)
+                    n_terms += 1
+                    n_pairs += int(target.sum())
+                prev = (q, pts, ids)
+        l_asso = total / max(1, n_terms)
+        return {"loss": l_asso, "asso": l_asso, "pairs": torch.tensor(float(n_pairs))}
 
 
 class Stage2Objective(nn.Module):
@@ -214,6 +302,31 @@ class Stage2Objective(nn.Module):
             outs.append(out)
         return outs
 
+    def matched(
+        self, out: DetectorOutput, b: int, gt: dict
+    ) -> tuple[torch.Tensor, torch.Tensor, list[int]]:
+        """Sample b's detections above the score threshold that lie on a GT instance: classes
+        (M,), points (M, P, 2) ego metres and their GT ids. Decoder instances are matched as in
+        L_det; vectorised segmentation instances (``model.instances``) by ``gt_ids_of``."""
+        det, thr = self.detector, self.cfg.stage2.score_threshold
+        if det.cfg.instances == "segmentation":
+            inst, _ = det.segment_instances(out.bev[b : b + 1])
+            dev = out.bev.device
+            cls_all = torch.as_tensor(inst.classes, device=dev)  # (N,)
+            pts_all = torch.as_tensor(inst.points, device=dev)  # (N, P, 2) metres
+            ids_all = gt_ids_of(pts_all, cls_all, gt)  # (N,)
+            keep = torch.nonzero((ids_all >= 0) & torch.as_tensor(inst.scores > thr)).flatten()
+            return cls_all[keep], pts_all[keep], ids_all[keep].tolist()
+        keep = torch.nonzero(out.scores()[b] > thr).flatten()
+        if keep.numel() == 0:
+            return out.classes()[b, keep], out.points[-1][b, keep], []
+        pi, gi, _ = self.criterion.matcher(
+            out.logits[-1][b, keep], out.points[-1][b, keep], gt["classes"], gt["points01"]
+        )
+        slots = keep[pi]  # (M,)
+        pts = det.to_metres(out.points[-1][b, slots]).float()  # (M, P, 2)
+        return out.classes()[b, slots], pts, gt["ids"][gi].tolist()
+
     def forward(self, batch: dict) -> dict[str, torch.Tensor]:
         if self.map_factory is None:
             from icmapper import GlobalMap  # the Rust engine
@@ -232,16 +345,13 @@ class Stage2Objective(nn.Module):
             for t, out in enumerate(outs):
                 gt = prepare_gt(batch["gt"][b][t], det, dev)
                 pose = batch["poses"][b, t].cpu().numpy().astype(np.float64)
-                keep = torch.nonzero(out.scores()[b] > cfg.stage2.score_threshold).flatten()
-                if keep.numel() == 0 or gt["ids"].numel() == 0:
+                if gt["ids"].numel() == 0:
                     continue
-                pi, gi, _ = self.criterion.matcher(
-                    out.logits[-1][b, keep], out.points[-1][b, keep], gt["classes"], gt["points01"]
-                )
-                slots = keep[pi]  # (M,)
-                cls = out.classes()[b, slots]  # (M,)
-                pts = det.to_metres(out.points[-1][b, slots]).float()  # (M, P, 2)
-                ids = gt["ids"][gi].tolist()
+                cls, pts, ids = self.matched(out, b, gt)  # (M,), (M, P, 2) metres, M ids
+                if not ids:
+                    continue
+                gt_row = {int(i): r for r, i in enumerate(gt["ids"].tolist())}
+                gi = torch.tensor([gt_row[i] for i in ids], dtype=torch.int64, device=dev)  # (M,)
                 h_ids, _, h_pts, _ = gmap.sample_patch(
                     pose_to_xy_yaw(pose),
                     (r.half_x, r.half_y),

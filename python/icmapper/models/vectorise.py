@@ -1,0 +1,181 @@
+"""Map instances from the dense BEV segmentation (HDMapNet-style vectorisation).
+
+The segmentation head (``models.segmentation``) reads the BEV far better than the set decoder
+(checkpoint README: IoU 80-84 % against decoder AP 10-32), so the detector can take its instances
+from the masks instead (``model.instances = "segmentation"``):
+
+- the class probabilities (K, X, Y) are upsampled ``upsample`` times (bilinear) and thresholded;
+- a divider or boundary mask is thinned to its skeleton (scikit-image); the skeleton is cut at its
+  junctions into branches, each branch is ordered into a polyline, simplified and resampled to P
+  points; branches shorter than ``min_length`` metres are dropped;
+- each connected crossing mask becomes the minimum rotated rectangle of its cells, shrunk by the
+  target's line radius (the targets mark cells within that radius of the contour), resampled to P
+  points along its closed contour;
+- an instance's score is the mean probability of its cells (its skeleton for lines).
+
+Everything here is numpy / scipy / scikit-image / shapely on one frame; no gradients.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+#: Class index of crossings (closed contours); the other classes are open polylines.
+CROSSING = 0
+_K8 = np.ones((3, 3), dtype=np.int64)
+
+
+@dataclass(frozen=True)
+class VectoriseParams:
+    """Settings of ``vectorise`` (metres unless said)."""
+
+    upsample: int = 4  # bilinear upsampling of the probabilities before thresholding
+    threshold: float = 0.5  # probability above which a cell belongs to the class
+    min_length: float = 2.0  # shorter line branches are dropped
+    min_area: float = 2.0  # smaller crossing components (m^2) are dropped
+    shrink: float = 0.9  # crossing rectangles shrink by this (the target's line radius)
+    simplify: float = 0.2  # Douglas-Peucker tolerance of line branches before resampling
+    num_points: int = 20  # points per instance
+
+    def __post_init__(self) -> None:
+        if self.upsample < 1 or self.num_points < 2:
+            raise ValueError("vectorise: upsample must be >= 1 and num_points >= 2")
+        if not 0.0 < self.threshold < 1.0:
+            raise ValueError(f"vectorise: threshold must be in (0, 1), got {self.threshold}")
+        for key in ("min_length", "min_area", "shrink", "simplify"):
+            if not getattr(self, key) >= 0:
+                raise ValueError(f"vectorise: {key} must be >= 0, got {getattr(self, key)}")
+
+
+@dataclass(frozen=True)
+class VectorInstances:
+    """classes (N,) int64; scores (N,) float32 in [0, 1]; points (N, P, 2) float32 ego metres."""
+
+    classes: NDArray[np.int64]
+    scores: NDArray[np.float32]
+    points: NDArray[np.float32]
+
+    def __len__(self) -> int:
+        return int(self.classes.shape[0])
+
+
+def resample_polyline(line: NDArray[np.float64], n: int, closed: bool) -> NDArray[np.float32]:
+    """``n`` points evenly spaced along a polyline (L, 2), or along a closed ring (its first
+    point is not repeated) -> (n, 2)."""
+    pts = np.vstack([line, line[:1]]) if closed else line
+    seg = np.linalg.norm(np.diff(pts, axis=0), axis=1)  # (L - 1,)
+    cum = np.concatenate([[0.0], np.cumsum(seg)])
+    total = cum[-1]
+    d = np.linspace(0.0, total, n + 1)[:-1] if closed else np.linspace(0.0, total, n)
+    if total <= 0:
+        return np.repeat(pts[:1], n, axis=0).astype(np.float32)
+    x = np.interp(d, cum, pts[:, 0])
+    y = np.interp(d, cum, pts[:, 1])
+    return np.stack([x, y], axis=-1).astype(np.float32)
+
+
+def _order_branch(cells: NDArray[np.int64]) -> NDArray[np.int64]:
+    """The cells (L, 2) of one skeleton branch (no junctions) in path order, from an end."""
+    member = {(int(i), int(j)) for i, j in cells}
+
+    def neighbours(p: tuple[int, int]) -> list[tuple[int, int]]:
+        out = []
+        for di in (-1, 0, 1):
+            for dj in (-1, 0, 1):
+                q = (p[0] + di, p[1] + dj)
+                if (di or dj) and q in member:
+                    out.append(q)
+        return out
+
+    ends = sorted(p for p in member if len(neighbours(p)) <= 1)
+    cur = ends[0] if ends else min(member)
+    path, seen = [cur], {cur}
+    while True:
+        nxt = [q for q in neighbours(cur) if q not in seen]
+        if not nxt:
+            break
+        cur = min(nxt, key=lambda q: (abs(q[0] - cur[0]) + abs(q[1] - cur[1]), q))
+        seen.add(cur)
+        path.append(cur)
+    return np.asarray(path, dtype=np.int64)
+
+
+def vectorise(
+    prob: NDArray[np.floating],
+    half_x: float,
+    half_y: float,
+    params: VectoriseParams | None = None,
+) -> VectorInstances:
+    """Instances of one frame from class probabilities ``prob`` (K, X, Y) in [0, 1] on the BEV
+    grid (X cells along ego x over [-half_x, half_x], Y along ego y). Class ``CROSSING`` is closed.
+    ValueError on a wrong shape or non-finite probabilities."""
+    import torch
+    import torch.nn.functional as F
+    from scipy import ndimage
+    from shapely.geometry import LineString, MultiPoint, Polygon
+    from skimage.morphology import skeletonize
+
+    p = params or VectoriseParams()
+    prob = np.asarray(prob)
+    if prob.ndim != 3 or min(prob.shape) < 1:
+        raise ValueError(f"vectorise: prob must be (K, X, Y), got {prob.shape}")
+    if not np.all(np.isfinite(prob)):
+        raise ValueError("vectorise: probabilities contain NaN or inf")
+    if p.upsample > 1:
+        t = torch.from_numpy(np.ascontiguousarray(prob, dtype=np.float32))[None]
+        prob = F.interpolate(t, scale_factor=p.upsample, mode="bilinear", align_corners=False)[0]
+        prob = prob.numpy()
+    k_num, nx, ny = prob.shape
+    sx, sy = 2 * half_x / nx, 2 * half_y / ny
+
+    def metres(ij: NDArray[np.int64]) -> NDArray[np.float64]:
+        return np.stack([(ij[:, 0] + 0.5) * sx - half_x, (ij[:, 1] + 0.5) * sy - half_y], -1)
+
+    classes: list[int] = []
+    scores: list[float] = []
+    points: list[NDArray[np.float32]] = []
+    for k in range(k_num):
+        mask = prob[k] > p.threshold
+        if not mask.any():
+            continue
+        if k == CROSSING:
+            labels, n = ndimage.label(mask, _K8)
+            for c in range(1, n + 1):
+                comp = labels == c
+                if comp.sum() * sx * sy < p.min_area:
+                    continue
+                rect = MultiPoint(metres(np.argwhere(comp))).minimum_rotated_rectangle
+                if p.shrink > 0 and isinstance(rect, Polygon):
+                    small = rect.buffer(-p.shrink, join_style="mitre")
+                    rect = small if isinstance(small, Polygon) and small.area > 0 else rect
+                if not isinstance(rect, Polygon) or rect.area <= 0:
+                    continue
+                ring = np.asarray(rect.exterior.coords, np.float64)[:-1]
+                classes.append(k)
+                scores.append(float(prob[k][comp].mean()))
+                points.append(resample_polyline(ring, p.num_points, closed=True))
+            continue
+        skel = skeletonize(mask)
+        degree = ndimage.convolve(skel.astype(np.int64), _K8, mode="constant") - 1
+        junctions = ndimage.binary_dilation(skel & (degree >= 3), _K8) & skel
+        labels, n = ndimage.label(skel & ~junctions, _K8)
+        for c in range(1, n + 1):
+            path = _order_branch(np.argwhere(labels == c))
+            if len(path) < 2:
+                continue
+            line = LineString(metres(path))
+            if line.length < p.min_length:
+                continue
+            simple = np.asarray(line.simplify(p.simplify).coords, np.float64)
+            classes.append(k)
+            scores.append(float(prob[k][path[:, 0], path[:, 1]].mean()))
+            points.append(resample_polyline(simple, p.num_points, closed=False))
+    n_out = len(classes)
+    return VectorInstances(
+        np.asarray(classes, np.int64),
+        np.asarray(scores, np.float32).reshape(n_out),
+        np.stack(points) if n_out else np.zeros((0, p.num_points, 2), np.float32),
+    )

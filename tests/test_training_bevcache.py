@@ -1,0 +1,133 @@
+"""Decoder training on cached BEVs of a frozen encoder (icmapper.training.bevcache,
+``stage1.freeze_encoder``): the cache holds what inference streams, the objective gives the same
+losses on cached BEVs as on images, the encoder stays frozen, and the cache is reused or rebuilt."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+import torch
+from icmapper.data.datasets import ClipDataset, SequenceDataset, collate_clips
+from icmapper.data.sources import open_source
+from icmapper.models.checkpoint import load_checkpoint
+from icmapper.training.bevcache import (
+    ENCODER_PARTS,
+    BevClipDataset,
+    collate_bev_clips,
+    encode_sequences,
+)
+from icmapper.training.config import config_from_dict
+from icmapper.training.loop import train
+from icmapper.training.objectives import Stage1Objective, prev_to_cur
+
+TINY = {
+    "log_every": 1,
+    "ckpt_every": 100,
+    "model": {
+        "num_cameras": 6,
+        "backbone_widths": [8, 16],
+        "backbone_depths": [1, 1],
+        "channels": 16,
+        "bev_x": 20,
+        "bev_y": 10,
+        "num_queries": 8,
+        "num_layers": 2,
+        "topk": 3,
+        "point_refine": True,
+    },
+    "data": {"source": "sim:val:1", "clip_len": 2, "image_size": [32, 64]},
+    "stage1": {"batch_size": 1, "steps": 2, "warmup_steps": 0},
+}
+
+
+@pytest.fixture(autouse=True)
+def _threads() -> None:
+    torch.set_num_threads(1)
+
+
+def _cfg(**stage1: object) -> object:
+    return config_from_dict({**TINY, "stage1": {**TINY["stage1"], **stage1}})
+
+
+@pytest.fixture(scope="module")
+def encoder_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A 2-step ordinary stage-1 run: the encoder checkpoint of the frozen runs."""
+    out = tmp_path_factory.mktemp("encoder")
+    train(_cfg(), 1, out, progress=False)
+    return out / "stage1.pt"
+
+
+def _net(cfg: object, ckpt: Path) -> object:
+    from icmapper.models.network import ICMapperNet
+
+    net = ICMapperNet(cfg.model, cfg.perception_range)
+    net.load_state_dict(load_checkpoint(ckpt)["model"])
+    return net.eval()
+
+
+def test_cache_holds_the_streamed_bev(encoder_run: Path, tmp_path: Path) -> None:
+    cfg = _cfg()
+    net = _net(cfg, encoder_run)
+    seqs = list(open_source("sim:val:1", image_size=(32, 64)))
+    (bev,) = encode_sequences(net.detector, seqs, cfg.perception_range, tmp_path, (32, 64))
+    item = SequenceDataset(seqs, cfg.perception_range)[0]
+    state, poses = None, item["poses"][None]
+    with torch.no_grad():
+        for t in (0, 1, 2):
+            motion = prev_to_cur(poses, t) if t > 0 else None
+            out, state = net.detector(item["images"][None, t], item["intrinsics"][None, t],
+                                      item["cam_to_ego"][None, t], state, motion)  # fmt: skip
+            assert torch.equal(bev[t], out.bev[0].half())
+    assert bev.shape == (len(seqs[0]), 16, 20, 10) and bev.dtype == torch.float16
+
+
+def test_objective_on_cached_bev_matches_images(encoder_run: Path, tmp_path: Path) -> None:
+    cfg = _cfg()
+    net = _net(cfg, encoder_run)
+    seqs = list(open_source("sim:val:1", image_size=(32, 64)))
+    bevs = encode_sequences(net.detector, seqs, cfg.perception_range, tmp_path, (32, 64))
+    objective = Stage1Objective(net, cfg).eval()
+    images = collate_clips([ClipDataset(seqs, 2, cfg.perception_range)[0]])
+    cached = collate_bev_clips([BevClipDataset(seqs, bevs, 2, cfg.perception_range)[0]])
+    assert cached["images"] is None and cached["bev"].shape == (1, 2, 16, 20, 10)
+    with torch.no_grad():
+        a, b = objective(images), objective(cached)
+    for key in ("det", "trans", "asso"):
+        assert float(b[key]) == pytest.approx(float(a[key]), rel=2e-2, abs=1e-3), key
+    with pytest.raises(ValueError, match="needs bev"):
+        objective({**cached, "bev": None})
+
+
+def test_frozen_encoder_training(encoder_run: Path, tmp_path: Path) -> None:
+    cfg = _cfg(freeze_encoder=True)
+    with pytest.raises(ValueError, match="needs --init"):
+        train(cfg, 1, tmp_path / "noinit", progress=False)
+    train(cfg, 1, tmp_path, init=encoder_run, progress=False)
+    before, after = load_checkpoint(encoder_run)["model"], load_checkpoint(tmp_path / "stage1.pt")
+    after = after["model"]
+    enc = [k for k in after if k.split(".")[1] in ENCODER_PARTS and k.startswith("detector.")]
+    assert enc and all(torch.equal(before[k], after[k]) for k in enc)
+    dec = [k for k in after if k.startswith("detector.decoder.")]
+    assert any(not torch.equal(before[k], after[k]) for k in dec)
+    files = sorted((tmp_path / "bev-cache").rglob("*.pt"))
+    assert len(files) == 1
+    stamp = files[0].stat().st_mtime_ns
+    # a second run reads the cache; a corrupt file is rebuilt, never trusted
+    train(cfg, 1, tmp_path / "again", init=encoder_run, progress=False)
+    cached = dict(TINY["data"], bev_cache_dir=str(tmp_path / "bev-cache"))
+    frozen = {**TINY["stage1"], "freeze_encoder": True}
+    cfg2 = config_from_dict({**TINY, "data": cached, "stage1": frozen})
+    train(cfg2, 1, tmp_path / "shared", init=encoder_run, progress=False)
+    assert files[0].stat().st_mtime_ns == stamp
+    files[0].write_bytes(b"not a torch file")
+    train(cfg2, 1, tmp_path / "rebuilt", init=encoder_run, progress=False)
+    assert torch.load(files[0], weights_only=True)["bev"].dtype == torch.float16
+    assert not [p for p in files[0].parent.iterdir() if p.name.endswith(".tmp")]
+
+
+def test_frozen_encoder_needs_a_fitting_checkpoint(encoder_run: Path, tmp_path: Path) -> None:
+    raw = {**TINY, "model": {**TINY["model"], "channels": 32}}
+    cfg = config_from_dict({**raw, "stage1": {**TINY["stage1"], "freeze_encoder": True}})
+    with pytest.raises(ValueError, match="does not hold this config's encoder"):
+        train(cfg, 1, tmp_path, init=encoder_run, progress=False)

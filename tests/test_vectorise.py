@@ -1,0 +1,195 @@
+"""Vectorisation of the dense segmentation (icmapper.models.vectorise): rasterised ground truth
+comes back as the same instances; the detector's segmentation instances; GT ids of detections."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+from icmapper.models.segmentation import rasterise
+from icmapper.models.vectorise import VectoriseParams, resample_polyline, vectorise
+from icmapper.training.objectives import gt_ids_of
+
+HX, HY = 30.0, 15.0
+
+
+def _chamfer(a: np.ndarray, b: np.ndarray) -> float:
+    d = np.linalg.norm(a[:, None] - b[None], axis=-1)
+    return 0.5 * float(d.min(0).mean() + d.min(1).mean())
+
+
+def _dense(line: np.ndarray, closed: bool = False) -> np.ndarray:
+    return resample_polyline(line, 200, closed)
+
+
+def _scene() -> tuple[torch.Tensor, torch.Tensor]:
+    """Two dividers 3.5 m apart, a curved boundary, a 4 x 8 m crossing: (G, P, 2), (G,)."""
+    x = np.linspace(-25, 25, 20)
+    div1 = np.stack([x, np.full(20, 1.75)], -1)
+    div2 = np.stack([x, np.full(20, -1.75)], -1)
+    bound = np.stack([x, 8.0 + 0.002 * x**2], -1)
+    rect = np.array([[10, -6], [14, -6], [14, 2], [10, 2]], np.float64)
+    cross = resample_polyline(rect, 20, closed=True)
+    pts = np.stack([cross, div1, div2, bound]).astype(np.float32)
+    return torch.from_numpy(pts), torch.tensor([0, 1, 1, 2])
+
+
+def test_rasterised_truth_comes_back() -> None:
+    pts, cls = _scene()
+    # targets on a 0.3 m grid, as the upsampled head gives them (line radius 0.225 m)
+    mask = rasterise(pts, cls, 200, 100, HX, HY, line_radius=0.225).numpy()
+    prob = 0.05 + 0.9 * mask
+    inst = vectorise(prob, HX, HY, VectoriseParams(upsample=1, shrink=0.225))
+    assert sorted(inst.classes.tolist()) == [0, 1, 1, 2]
+    assert inst.points.shape == (4, 20, 2) and inst.points.dtype == np.float32
+    assert np.all((inst.scores > 0.9) & (inst.scores <= 1.0))
+    for g in range(4):
+        k = int(cls[g])
+        closed = k == 0
+        best = min(
+            _chamfer(
+                _dense(inst.points[i], closed), _dense(pts[g].numpy().astype(np.float64), closed)
+            )  # fmt: skip
+            for i in np.flatnonzero(inst.classes == k)
+        )
+        assert best < 0.3, (g, best)
+
+
+def test_upsampled_coarse_head() -> None:
+    """The shipped setting: a 1.2 m grid upsampled 4x still places lines within half a cell."""
+    pts, cls = _scene()
+    mask = rasterise(pts, cls, 50, 25, HX, HY).numpy()
+    inst = vectorise(0.05 + 0.9 * mask, HX, HY)
+    for g in (1, 2, 3):
+        k = int(cls[g])
+        best = min(_chamfer(_dense(inst.points[i]), _dense(pts[g].numpy().astype(np.float64)))
+                   for i in np.flatnonzero(inst.classes == k))  # fmt: skip
+        assert best < 0.6, (g, best)
+
+
+def test_empty_and_bad_input() -> None:
+    empty = vectorise(np.zeros((3, 50, 25)), HX, HY)
+    assert len(empty) == 0 and empty.points.shape == (0, 20, 2)
+    bad = np.zeros((3, 50, 25))
+    bad[1, 3, 3] = np.nan
+    with pytest.raises(ValueError, match="NaN"):
+        vectorise(bad, HX, HY)
+    with pytest.raises(ValueError, match=r"\(K, X, Y\)"):
+        vectorise(np.zeros((50, 25)), HX, HY)
+    with pytest.raises(ValueError, match="threshold"):
+        VectoriseParams(threshold=1.5)
+
+
+def test_resample_polyline() -> None:
+    line = np.array([[0.0, 0.0], [10.0, 0.0]])
+    out = resample_polyline(line, 11, closed=False)
+    np.testing.assert_allclose(out[:, 0], np.arange(11.0), atol=1e-5)
+    ring = resample_polyline(np.array([[0.0, 0], [4, 0], [4, 4], [0, 4]]), 8, closed=True)
+    np.testing.assert_allclose(np.linalg.norm(np.diff(ring, axis=0), axis=1), 2.0, atol=1e-5)
+    assert resample_polyline(np.zeros((3, 2)), 5, closed=False).shape == (5, 2)
+
+
+def test_gt_ids_of() -> None:
+    pts, cls = _scene()
+    gt = {"ids": torch.tensor([7, 8, 9, 10]), "classes": cls, "points": pts}
+    det = torch.stack([pts[2] + 0.3, pts[1], pts[3] + 5.0])  # divider 9, divider 8, far boundary
+    ids = gt_ids_of(det, torch.tensor([1, 1, 2]), gt)
+    assert ids.tolist() == [9, 8, -1]
+    # a detection of the wrong class never takes the id
+    assert gt_ids_of(pts[:1], torch.tensor([1]), gt).tolist() == [-1]
+    assert gt_ids_of(pts[:0], torch.tensor([], dtype=torch.int64), gt).shape == (0,)
+
+
+class _TruthSeg(torch.nn.Module):
+    """A segmentation head that returns given logits (K, X, Y) whatever the BEV."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.logits = torch.zeros(1)
+
+    def forward(self, bev: torch.Tensor) -> torch.Tensor:
+        return self.logits[None].expand(bev.shape[0], -1, -1, -1)
+
+
+def test_network_detector_takes_segmentation_instances() -> None:
+    """With ``model.instances = "segmentation"`` the streaming detector returns the vectorised
+    masks (here the rasterised truth), in ego metres, with one BEV embedding per instance."""
+    from icmapper.data.gt import sequence_gt
+    from icmapper.data.sources import open_source
+    from icmapper.data.types import PerceptionRange
+    from icmapper.mapping.network_source import NetworkDetector
+    from icmapper.models.config import ModelConfig
+    from icmapper.models.detector import MapDetector
+
+    torch.manual_seed(0)
+    cfg = ModelConfig(
+        backbone_widths=(8, 16), backbone_depths=(1, 1), channels=16, num_queries=8,
+        num_layers=1, topk=3, seg_head=True, instances="segmentation",
+    )  # fmt: skip
+    rng = PerceptionRange.from_name("60x30")
+    det = MapDetector(cfg, rng)
+    det.seg = _TruthSeg()
+    (seq,) = open_source("sim:val:1", image_size=(32, 64))
+    gts = sequence_gt(seq, rng)
+    source = NetworkDetector(det)
+    for i in (0, 1):
+        g = gts[i]
+        mask = rasterise(torch.as_tensor(g.points), torch.as_tensor(g.classes), 50, 25, HX, HY)
+        det.seg.logits = (mask * 2 - 1) * 6.0  # sure inside, sure outside
+        out = source.detect(seq.frame(i))
+        assert out.queries is not None and out.queries.shape == (len(out), 16)
+        assert np.all(np.diff(out.scores) <= 0)
+        for k in (1, 2):
+            truth = [
+                _dense(line.astype(np.float64))
+                for line in np.asarray(g.points)[np.asarray(g.classes) == k]
+            ]
+            found = [_dense(c.astype(np.float64)) for c in out.points[out.classes == k]]
+            assert truth and found
+            every_truth = np.concatenate(truth)
+            every_found = np.concatenate(found)
+            # precision: each detected line lies on the truth (within one 1.2 m cell)
+            for c in found:
+                d = np.linalg.norm(c[:, None] - every_truth[None], axis=-1).min(1)
+                assert d.mean() < 1.0
+            # recall: most of the true lines are covered by a detection
+            d = np.linalg.norm(every_truth[:, None] - every_found[None], axis=-1).min(1)
+            assert (d < 1.5).mean() > 0.8
+    with pytest.raises(ValueError, match="needs model.seg_head"):
+        ModelConfig(instances="segmentation")
+    with pytest.raises(ValueError, match="model.instances"):
+        ModelConfig(instances="pixels")
+
+
+def test_stage2_matches_segmentation_instances_to_the_truth() -> None:
+    """Stage 2 (fusion) of a segmentation-instance network takes the vectorised instances that lie
+    on a ground-truth instance, with that instance's id and class."""
+    from icmapper.data.datasets import SequenceDataset
+    from icmapper.data.sources import open_source
+    from icmapper.models.network import ICMapperNet
+    from icmapper.training.config import config_from_dict
+    from icmapper.training.objectives import Stage2Objective, prepare_gt
+
+    cfg = config_from_dict({
+        "model": {"backbone_widths": [8, 16], "backbone_depths": [1, 1], "channels": 16,
+                  "num_queries": 8, "num_layers": 1, "topk": 3, "seg_head": True,
+                  "instances": "segmentation"},
+        "data": {"image_size": [32, 64]},
+    })  # fmt: skip
+    torch.manual_seed(0)
+    net = ICMapperNet(cfg.model, cfg.perception_range)
+    net.detector.seg = _TruthSeg()
+    objective = Stage2Objective(net, cfg)
+    seqs = list(open_source("sim:val:1", image_size=(32, 64)))
+    item = SequenceDataset(seqs, cfg.perception_range)[0]
+    g = item["gt"][3]
+    mask = rasterise(g["points"], g["classes"], 50, 25, HX, HY)
+    net.detector.seg.logits = (mask * 2 - 1) * 6.0
+    with torch.no_grad():
+        out, _ = net.detector(item["images"][None, 3], item["intrinsics"][None, 3],
+                              item["cam_to_ego"][None, 3])  # fmt: skip
+    gt = prepare_gt(g, net.detector, torch.device("cpu"))
+    cls, pts, ids = objective.matched(out, 0, gt)
+    assert len(ids) >= 3 and len(set(ids)) == len(ids) and pts.shape == (len(ids), 20, 2)
+    truth_cls = dict(zip(g["ids"].tolist(), g["classes"].tolist(), strict=True))
+    assert all(truth_cls[i] == int(c) for i, c in zip(ids, cls.tolist(), strict=True))
