@@ -7,12 +7,12 @@ as a plain dict and the torch RNG state.
 
 from __future__ import annotations
 
-import os
-import tempfile
 from pathlib import Path
 from typing import Any
 
 import torch
+
+from icmapper.atomic import atomic_open
 
 FORMAT = "icmapper-checkpoint"
 VERSION = 1
@@ -27,7 +27,7 @@ def save_checkpoint(
     step: int,
     config: dict[str, Any],
 ) -> None:
-    """Writes a checkpoint atomically (temp file in the same folder + os.replace)."""
+    """Writes a checkpoint atomically (``icmapper.atomic``)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     blob = {
@@ -40,14 +40,8 @@ def save_checkpoint(
         "config": config,
         "rng": torch.get_rng_state(),
     }
-    fd, tmp = tempfile.mkstemp(prefix=path.name, suffix=".tmp", dir=path.parent)
-    os.close(fd)
-    try:
-        torch.save(blob, tmp)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    with atomic_open(path, "wb") as fh:
+        torch.save(blob, fh)
 
 
 def load_checkpoint(path: str | Path, map_location: str | torch.device = "cpu") -> dict[str, Any]:

@@ -14,8 +14,6 @@ stale or corrupt file is recomputed.
 from __future__ import annotations
 
 import hashlib
-import os
-import tempfile
 from collections.abc import Callable
 from pathlib import Path
 
@@ -23,6 +21,7 @@ import numpy as np
 import torch
 from torch.utils.data import Dataset
 
+from icmapper.atomic import atomic_open
 from icmapper.data.datasets import ClipDataset, SequenceDataset, collate_clips
 from icmapper.data.sources import Sequence
 from icmapper.data.types import PerceptionRange
@@ -40,17 +39,6 @@ def encoder_digest(detector: MapDetector, image_size: tuple[int, int]) -> str:
             h.update(name.encode())
             h.update(t.detach().cpu().contiguous().numpy().tobytes())
     return h.hexdigest()[:16]
-
-
-def _save_atomic(path: Path, blob: dict) -> None:
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    os.close(fd)
-    try:
-        torch.save(blob, tmp)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
 
 
 def _load(path: Path, frames: int) -> torch.Tensor | None:
@@ -113,7 +101,8 @@ def encode_sequences(
             bev = _load(path, len(seq))
             if bev is None:
                 bev = encode_sequence(detector, ds[i])
-                _save_atomic(path, {"bev": bev, "name": seq.name})
+                with atomic_open(path, "wb") as fh:
+                    torch.save({"bev": bev, "name": seq.name}, fh)
                 if log is not None and (i + 1) % 8 == 0:
                     log(f"BEV cache: {i + 1}/{len(sequences)} sequences encoded into {root}")
             bevs.append(bev)
