@@ -141,3 +141,42 @@ def test_tracker_restore_is_validated_and_atomic() -> None:
         with pytest.raises(ValueError, match=match):
             tr.restore(bad, next_id=9)
         assert [t.id for t in tr.tracks] == [3, 5] and tr.next_id == 6  # unchanged
+
+
+class _Scripted:
+    """A detection source replaying given Detections, one per frame."""
+
+    def __init__(self, frames: list) -> None:
+        self.frames = frames
+
+    def reset(self) -> None:
+        pass
+
+    def detect(self, frame: object) -> object:
+        return self.frames[frame.index]  # type: ignore[attr-defined]
+
+
+@pytest.mark.parametrize("alias", [True, False])
+def test_reid_alias_setting(alias: bool) -> None:
+    """A second new piece lying on an instance matched this frame maps into it with
+    ``reid_alias``; without, it stays its own instance."""
+    from icmapper.data.sim.rig import nuscenes_rig
+    from icmapper.data.types import Frame
+    from icmapper.mapping.types import Detections
+
+    def line(x0: float, x1: float, y: float) -> np.ndarray:
+        return np.stack([np.linspace(x0, x1, 20), np.full(20, y)], -1).astype(np.float32)
+
+    def dets(*lines: np.ndarray) -> Detections:
+        n = len(lines)
+        return Detections(np.ones(n, np.int64), np.full(n, 0.9, np.float32), np.stack(lines))
+
+    # frame 0: a divider 0..20 m; frame 1: the same divider, and a short piece lying on its end
+    script = [dets(line(0, 20, 2.0)), dets(line(0, 20, 2.0), line(14, 20, 2.1))]
+    cfg = MapperConfig(min_hits=1, reid_alias=alias, detect_threshold=0.0, track_threshold=0.0)
+    m = Mapper(_Scripted(script), config=cfg)
+    rig = nuscenes_rig((32, 88))
+    for i in range(2):
+        m.step(Frame(i, float(i), np.eye(4), rig))
+    assert m.stats.aliased == (1 if alias else 0)
+    assert len(m.global_map) == (1 if alias else 2)

@@ -11,6 +11,7 @@ import torch
 from icmapper.data.datasets import ClipDataset, SequenceDataset, collate_clips
 from icmapper.data.sources import open_source
 from icmapper.models.checkpoint import load_checkpoint
+from icmapper.testing.configs import tiny_raw
 from icmapper.training.bevcache import (
     ENCODER_PARTS,
     BevClipDataset,
@@ -21,24 +22,11 @@ from icmapper.training.config import config_from_dict
 from icmapper.training.loop import train
 from icmapper.training.objectives import Stage1Objective, prev_to_cur
 
-TINY = {
-    "log_every": 1,
-    "ckpt_every": 100,
-    "model": {
-        "num_cameras": 6,
-        "backbone_widths": [8, 16],
-        "backbone_depths": [1, 1],
-        "channels": 16,
-        "bev_x": 20,
-        "bev_y": 10,
-        "num_queries": 8,
-        "num_layers": 2,
-        "topk": 3,
-        "point_refine": True,
-    },
-    "data": {"source": "sim:val:1", "clip_len": 2, "image_size": [32, 64]},
-    "stage1": {"batch_size": 1, "steps": 2, "warmup_steps": 0},
-}
+TINY = tiny_raw(
+    model={"num_cameras": 6, "channels": 16, "point_refine": True},
+    data={"source": "sim:val:1"},
+    stage1={"steps": 2, "lr": 5e-4},
+)
 
 
 @pytest.fixture(autouse=True)

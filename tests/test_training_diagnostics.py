@@ -9,29 +9,16 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
+from icmapper.testing.configs import tiny_raw
 from icmapper.training import curves, diagnostics
 from icmapper.training.config import config_from_dict
 from icmapper.training.loop import train
 
-TINY6 = {
-    "log_every": 1,
-    "ckpt_every": 100,
-    "snapshot_every": 2,
-    "model": {
-        "num_cameras": 6,
-        "backbone_widths": [8, 16],
-        "backbone_depths": [1, 1],
-        "channels": 16,
-        "bev_x": 20,
-        "bev_y": 10,
-        "num_queries": 8,
-        "num_layers": 1,
-        "topk": 3,
-        "seg_head": True,
-    },
-    "data": {"source": "synthetic:2", "clip_len": 2, "image_size": [32, 64]},
-    "stage1": {"batch_size": 1, "steps": 4, "warmup_steps": 0, "seg_weight": 1.0},
-}
+TINY6 = tiny_raw(
+    snapshot_every=2,
+    model={"num_cameras": 6, "channels": 16, "num_layers": 1, "seg_head": True},
+    stage1={"seg_weight": 1.0, "lr": 5e-4},
+)
 
 
 @pytest.fixture(autouse=True)

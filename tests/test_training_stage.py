@@ -12,45 +12,17 @@ from icmapper.data.types import ego_to_world, world_to_ego
 from icmapper.models.checkpoint import load_checkpoint, save_checkpoint
 from icmapper.models.network import ICMapperNet
 from icmapper.testing.clips import SyntheticClips, collate_clips
+from icmapper.testing.configs import tiny_config
 from icmapper.training.config import config_from_dict, config_to_dict, load_config
 from icmapper.training.loop import train
 from icmapper.training.objectives import Stage1Objective, Stage2Objective
 
 REPO = Path(__file__).resolve().parents[1]
 
-TINY = {
-    "log_every": 1,
-    "ckpt_every": 100,
-    "model": {
-        "num_cameras": 2,
-        "backbone_widths": [8, 16],
-        "backbone_depths": [1, 1],
-        "channels": 32,
-        "bev_x": 20,
-        "bev_y": 10,
-        "num_queries": 8,
-        "num_layers": 2,
-        "topk": 3,
-    },
-    "data": {"source": "synthetic:2", "clip_len": 2, "image_size": [32, 64]},
-    "stage1": {"batch_size": 1, "steps": 4, "warmup_steps": 0, "lr": 2e-3},
-    "stage2": {"clip_len": 3, "score_threshold": 0.0},
-}
-
 
 @pytest.fixture(autouse=True)
 def _threads() -> None:
     torch.set_num_threads(1)
-
-
-def _cfg(**over: dict) -> object:
-    raw = {k: (dict(v) if isinstance(v, dict) else v) for k, v in TINY.items()}
-    for k, v in over.items():
-        if isinstance(v, dict):
-            raw[k] = {**raw.get(k, {}), **v}
-        else:
-            raw[k] = v
-    return config_from_dict(raw)
 
 
 def _batch(cfg, clip_len: int | None = None) -> dict:
@@ -101,7 +73,7 @@ def test_fake_map_frames_roundtrip() -> None:
 
 
 def test_stage1_gradients_reach_trained_modules_only() -> None:
-    cfg = _cfg()
+    cfg = tiny_config()
     torch.manual_seed(0)
     net = ICMapperNet(cfg.model, cfg.perception_range)
     obj = Stage1Objective(net, cfg)
@@ -121,7 +93,7 @@ def test_seg_head_and_neck_train() -> None:
     """With a BEV neck and the dense segmentation target, the auxiliary loss is positive and its
     gradient reaches the neck, the head and the view transformer (but the head is not run at
     inference)."""
-    cfg = _cfg(model={"bev_neck": 1, "seg_head": True}, stage1={"seg_weight": 1.0})
+    cfg = tiny_config(model={"bev_neck": 1, "seg_head": True}, stage1={"seg_weight": 1.0})
     torch.manual_seed(0)
     net = ICMapperNet(cfg.model, cfg.perception_range)
     obj = Stage1Objective(net, cfg)
@@ -140,7 +112,7 @@ def test_seg_head_and_neck_train() -> None:
 
 
 def test_one_to_many_loss_trains_the_aux_queries() -> None:
-    cfg = _cfg(model={"aux_queries": 5}, stage1={"one_to_many_repeats": 2})
+    cfg = tiny_config(model={"aux_queries": 5}, stage1={"one_to_many_repeats": 2})
     torch.manual_seed(0)
     net = ICMapperNet(cfg.model, cfg.perception_range)
     losses = Stage1Objective(net, cfg)(_batch(cfg, clip_len=2))
@@ -150,22 +122,22 @@ def test_one_to_many_loss_trains_the_aux_queries() -> None:
     assert grad is not None and grad[cfg.model.num_queries :].abs().sum() > 0
     assert grad[: cfg.model.num_queries].abs().sum() == 0  # main queries: not from this loss
     with pytest.raises(ValueError, match="one_to_many"):
-        _cfg(stage1={"one_to_many_repeats": 0})
+        tiny_config(stage1={"one_to_many_repeats": 0})
 
 
 def test_seg_weight_needs_seg_head() -> None:
     with pytest.raises(ValueError, match="seg_head"):
-        _cfg(stage1={"seg_weight": 1.0})
+        tiny_config(stage1={"seg_weight": 1.0})
     with pytest.raises(ValueError, match="bev_neck"):
-        _cfg(model={"bev_neck": -1})
+        tiny_config(model={"bev_neck": -1})
     with pytest.raises(ValueError, match="snapshot_every"):
-        _cfg(snapshot_every=-5)
+        tiny_config(snapshot_every=-5)
 
 
 def test_snapshots_are_inference_checkpoints(tmp_path: Path) -> None:
     from icmapper.models.network import load_network
 
-    cfg = _cfg(snapshot_every=2)
+    cfg = tiny_config(snapshot_every=2)
     train(cfg, 1, tmp_path, progress=False)
     snaps = sorted((tmp_path / "snapshots").glob("*.pt"))
     assert [p.name for p in snaps] == ["stage1_step000002.pt", "stage1_step000004.pt"]
@@ -174,7 +146,7 @@ def test_snapshots_are_inference_checkpoints(tmp_path: Path) -> None:
 
 
 def test_stage2_gradients_reach_fusion_only() -> None:
-    cfg = _cfg()
+    cfg = tiny_config()
     torch.manual_seed(0)
     net = ICMapperNet(cfg.model, cfg.perception_range)
     obj = Stage2Objective(net, cfg, map_factory=FakeMap)
@@ -193,7 +165,7 @@ def test_stage2_gradients_reach_fusion_only() -> None:
 
 
 def test_tiny_overfit_losses_fall(tmp_path: Path) -> None:
-    cfg = _cfg(data={"source": "synthetic:1"}, stage1={"steps": 60, "lr": 3e-3})
+    cfg = tiny_config(data={"source": "synthetic:1"}, stage1={"steps": 60, "lr": 3e-3})
     res = train(cfg, 1, tmp_path, progress=False)
     import csv
 
@@ -204,7 +176,7 @@ def test_tiny_overfit_losses_fall(tmp_path: Path) -> None:
 
 
 def test_determinism_and_resume(tmp_path: Path) -> None:
-    cfg = _cfg()
+    cfg = tiny_config()
     a = train(cfg, 1, tmp_path / "a", progress=False)
     b = train(cfg, 1, tmp_path / "b", progress=False)
     assert a["param_digest"] == b["param_digest"]
@@ -218,7 +190,7 @@ def test_determinism_and_resume(tmp_path: Path) -> None:
 
 
 def test_checkpoint_roundtrip_and_errors(tmp_path: Path) -> None:
-    cfg = _cfg()
+    cfg = tiny_config()
     net = ICMapperNet(cfg.model, cfg.perception_range)
     opt = torch.optim.AdamW(net.parameters())
     path = tmp_path / "x" / "ck.pt"
@@ -232,7 +204,7 @@ def test_checkpoint_roundtrip_and_errors(tmp_path: Path) -> None:
     )
     blob = load_checkpoint(path)
     assert blob["step"] == 7 and config_from_dict(blob["config"]) == cfg
-    net2 = ICMapperNet(_cfg().model, _cfg().perception_range)
+    net2 = ICMapperNet(tiny_config().model, tiny_config().perception_range)
     net2.load_state_dict(blob["model"])
     for (k, v), (_, w) in zip(net.state_dict().items(), net2.state_dict().items(), strict=True):
         assert torch.equal(v, w), k
@@ -249,7 +221,7 @@ def test_checkpoint_roundtrip_and_errors(tmp_path: Path) -> None:
 
 
 def test_stage2_loop_runs_from_stage1(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    cfg = _cfg(stage2={"steps": 2, "clip_len": 3, "score_threshold": 0.0})
+    cfg = tiny_config(stage2={"steps": 2, "clip_len": 3, "score_threshold": 0.0})
     train(cfg, 1, tmp_path, max_steps=1, progress=False)
     import icmapper.training.objectives as objectives
 

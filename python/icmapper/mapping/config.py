@@ -38,6 +38,11 @@ class MapperConfig:
     assoc_threshold: float = _f(0.5, "θ: minimum association score of a match")
     min_hits: int = _f(2, "frames a new track must be seen before it enters the global map")
     reid_distance: float = _f(1.0, "metres; re-identification against the map (0: off)")
+    reid_alias: bool = _f(
+        True,
+        "re-identification maps a second new piece of an instance matched this frame into it "
+        "(false: the piece stays its own track)",
+    )
     fusion_margin: float = _f(
         20.0, "metres around the range for the sampled history (the fusion network's own value)"
     )

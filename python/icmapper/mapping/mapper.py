@@ -12,7 +12,8 @@ Per frame (paper Fig. 2):
    maximising the summed score; unmatched detections get new ids;
 3. re-identification against the map (an extension, documented in docs/mapping.md): a new track
    at least half of whose points lie within ``reid_distance`` of a same-class global instance takes
-   that instance's id, so a lost track does not duplicate the map;
+   that instance's id, so a lost track does not duplicate the map (with ``reid_alias``, a second
+   new piece of an instance matched this frame maps into it);
 4. the global map is sampled in the patch expanded by ``fusion_margin`` (Rust ``sample_patch``);
 5. fusion of every tracked detection with the history of its id;
 6. merge into the global map (curve fit for polylines, union for crossings), or insert once the
@@ -376,7 +377,7 @@ class Mapper:
         )
         ids = track_ids.copy()
         for j, tid in enumerate(track_ids.tolist()):
-            if tid in decision.aliased:
+            if tid in decision.aliased and self.config.reid_alias:
                 self._alias[tid] = decision.aliased[tid]
                 self.stats.aliased += 1
             elif tid in decision.renamed:
