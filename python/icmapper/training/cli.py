@@ -79,7 +79,7 @@ def run(args: argparse.Namespace) -> int:
 def fill_cache(cfg: TrainConfig, shard_spec: str) -> int:
     """``--fill-cache I/N``: renders data.source's frames into data.cache_dir."""
     from icmapper.data.datasets import ImageCache
-    from icmapper.data.sources import open_source
+    from icmapper.training.loop import training_sequences
 
     try:
         shard, num = (int(v) for v in shard_spec.split("/"))
@@ -87,12 +87,7 @@ def fill_cache(cfg: TrainConfig, shard_spec: str) -> int:
         raise ValueError(f"--fill-cache must be I/N (e.g. 0/2), got {shard_spec!r}") from None
     if not cfg.data.cache_dir:
         raise ValueError("--fill-cache needs data.cache_dir in the config (or --set)")
-    seqs = open_source(
-        cfg.data.source,
-        image_size=tuple(cfg.data.image_size),
-        seed=cfg.seed,
-        split_file=cfg.data.split_file or None,
-    )
-    n = ImageCache(cfg.data.cache_dir).fill(list(seqs), shard, num, log=print)
+    seqs = training_sequences(cfg)
+    n = ImageCache(cfg.data.cache_dir).fill(seqs, shard, num, log=print)
     print(f"cache {cfg.data.cache_dir}: {n} frames rendered (shard {shard}/{num})")
     return 0

@@ -57,6 +57,20 @@ def seed_everything(seed: int) -> None:
     torch.manual_seed(seed)
 
 
+def training_sequences(cfg: TrainConfig) -> list[Any]:
+    """The sequences of ``cfg.data.source`` at the config's image size, seed and split file."""
+    from icmapper.data.sources import open_source
+
+    return list(
+        open_source(
+            cfg.data.source,
+            image_size=tuple(cfg.data.image_size),
+            seed=cfg.seed,
+            split_file=cfg.data.split_file or None,
+        )
+    )
+
+
 def build_dataset(cfg: TrainConfig, stage: int) -> tuple[Dataset, Any]:
     """The clip dataset of ``cfg.data`` and its collate function.
 
@@ -83,17 +97,12 @@ def build_dataset(cfg: TrainConfig, stage: int) -> tuple[Dataset, Any]:
         )
         return ds, collate_clips
     try:
-        from icmapper.data import datasets, sources
+        from icmapper.data import datasets
     except ImportError as exc:
         raise RuntimeError(
             f"data source {spec!r} needs icmapper.data.datasets/sources, not available: {exc}"
         ) from None
-    seqs = sources.open_source(
-        spec,
-        image_size=tuple(cfg.data.image_size),
-        seed=cfg.seed,
-        split_file=cfg.data.split_file or None,
-    )
+    seqs = training_sequences(cfg)
     ds = datasets.ClipDataset(
         seqs,
         clip_len=clip_len,
@@ -126,16 +135,7 @@ def load_encoder(net: ICMapperNet, path: Path) -> None:
 
 def bev_dataset(cfg: TrainConfig, net: ICMapperNet, out: Path) -> tuple[Dataset, Any]:
     """The cached-BEV clips of ``cfg.data.source`` (encoded now where the cache lacks them)."""
-    from icmapper.data.sources import open_source
-
-    seqs = list(
-        open_source(
-            cfg.data.source,
-            image_size=tuple(cfg.data.image_size),
-            seed=cfg.seed,
-            split_file=cfg.data.split_file or None,
-        )
-    )
+    seqs = training_sequences(cfg)
     bevs = encode_sequences(
         net.detector,
         seqs,
