@@ -161,6 +161,59 @@ def test_network_detector_takes_segmentation_instances() -> None:
         ModelConfig(instances="pixels")
 
 
+def test_segmentation_streaming_skips_the_decoder_with_the_same_bev() -> None:
+    """In segmentation mode the streaming detector runs only the encoder (``encode_stream``): its
+    BEV memory is the one the full forward carries frame to frame, its instances those of that BEV,
+    and its state (no propagated queries) saves and restores."""
+    from icmapper.data.sources import open_source
+    from icmapper.data.types import PerceptionRange
+    from icmapper.mapping.network_source import NetworkDetector
+    from icmapper.models.config import ModelConfig
+    from icmapper.models.detector import MapDetector
+
+    torch.manual_seed(0)
+    cfg = ModelConfig(
+        backbone_widths=(8, 16), backbone_depths=(1, 1), channels=16, num_queries=8,
+        num_layers=1, topk=3, seg_head=True, instances="segmentation",
+    )  # fmt: skip
+    det = MapDetector(cfg, PerceptionRange.from_name("60x30")).eval()
+    with torch.no_grad():  # a head that fires on the BEV, so that instances exist
+        det.seg.net[-1].bias.fill_(0.0)
+    (seq,) = open_source("sim:val:1", image_size=(32, 64))
+    source = NetworkDetector(det)
+    state = prev_pose = None
+    seen = 0
+    for i in range(3):
+        frame = seq.frame(i)
+        pose = np.asarray(frame.pose, np.float64)
+        with torch.no_grad():
+            images = torch.as_tensor(np.asarray(frame.images))[None]
+            intr = torch.as_tensor(frame.rig.intrinsics, dtype=torch.float32)[None]
+            c2e = torch.as_tensor(frame.rig.cam_to_ego, dtype=torch.float32)[None]
+            motion = None
+            if prev_pose is not None:
+                m = np.linalg.inv(pose) @ prev_pose
+                motion = torch.as_tensor(m, dtype=torch.float32)[None]
+            out, state = det(images, intr, c2e, state, motion)  # the full forward
+            want, _ = det.segment_instances(out.bev)
+        prev_pose = pose
+        got = source.detect(frame)
+        assert torch.equal(source._state.bev, out.bev)
+        assert source._state.queries.shape == (1, 0, 16)
+        order = np.argsort(-want.scores, kind="stable")
+        np.testing.assert_array_equal(got.classes, want.classes[order])
+        np.testing.assert_array_equal(got.points, want.points[order])
+        seen += len(got)
+    assert seen > 0
+    saved = source.state_dict()
+    again = NetworkDetector(det)
+    again.load_state_dict(saved)
+    frame = seq.frame(3)
+    a, b = source.detect(frame), again.detect(frame)
+    np.testing.assert_array_equal(a.points, b.points)
+    np.testing.assert_array_equal(a.queries, b.queries)
+
+
 def test_stage2_matches_segmentation_instances_to_the_truth() -> None:
     """Stage 2 (fusion) of a segmentation-instance network takes the vectorised instances that lie
     on a ground-truth instance, with that instance's id and class."""

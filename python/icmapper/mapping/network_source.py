@@ -21,6 +21,9 @@ if TYPE_CHECKING:
 class NetworkDetector:
     """The learned detector as a streaming ``DetectionSource`` (memory carried between frames).
 
+    With ``model.instances = "segmentation"`` only the encoder runs (``encode_stream``): the
+    instances are the vectorised masks of the BEV, and the memory is the BEV alone.
+
     ``temporal=False`` gives the single-frame variant (no BEV memory, no query propagation).
     """
 
@@ -43,7 +46,8 @@ class NetworkDetector:
 
         Keys: ``has_state`` () bool; when true also ``bev`` (1, C, X, Y) float32, ``queries``
         (1, k, C) float32, ``points`` (1, k, P, 2) float32 in [0, 1], ``src_index`` (1, k) int64
-        (the ``DetectorState``) and ``prev_pose`` (4, 4) float64 ego->world of the last frame.
+        (the ``DetectorState``; k = 0 in segmentation mode) and ``prev_pose`` (4, 4) float64
+        ego->world of the last frame.
         """
         if self._state is None or self._prev_pose is None:
             return {"has_state": np.array(False)}
@@ -127,13 +131,14 @@ class NetworkDetector:
                 m = np.linalg.inv(pose) @ self._prev_pose  # (4, 4) previous ego -> current ego
                 motion = torch.as_tensor(m, dtype=torch.float32, device=dev)[None]
                 state = self._state
-            out, new_state = self.detector(images, intr, c2e, state, motion)
-            if self.detector.cfg.instances == "segmentation":
-                inst, queries = self.detector.segment_instances(out.bev)  # (N, C)
+            if self.detector.cfg.instances == "segmentation":  # the set decoder is not needed
+                bev, new_state = self.detector.encode_stream(images, intr, c2e, state, motion)
+                inst, queries = self.detector.segment_instances(bev)  # (N, C)
                 scores = torch.as_tensor(inst.scores, device=dev)  # (N,)
                 classes = torch.as_tensor(inst.classes, device=dev)  # (N,)
                 points = torch.as_tensor(inst.points, device=dev)  # (N, P, 2) ego metres
             else:
+                out, new_state = self.detector(images, intr, c2e, state, motion)
                 scores = out.scores()[0]  # (Q,)
                 classes = out.classes()[0]  # (Q,)
                 points = self.detector.to_metres(out.points[-1][0])  # (Q, P, 2) ego metres

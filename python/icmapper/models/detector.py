@@ -183,6 +183,31 @@ class MapDetector(nn.Module):
         bev = self.encode(images, intrinsics, cam_to_ego, prev_bev, prev_to_cur)
         return self.decode(bev, state, prev_to_cur)
 
+    def encode_stream(
+        self,
+        images: torch.Tensor,
+        intrinsics: torch.Tensor,
+        cam_to_ego: torch.Tensor,
+        state: DetectorState | None = None,
+        prev_to_cur: torch.Tensor | None = None,
+    ) -> tuple[torch.Tensor, DetectorState]:
+        """``encode`` as one streaming frame, without the decoder: the fused BEV (B, C, X, Y) and
+        a state that carries only it (no propagated queries: k = 0). With ``model.instances =
+        "segmentation"`` the instances come from this BEV alone, so inference skips the set
+        decoder; the BEV is the one ``forward`` makes (the memory reads only the previous BEV)."""
+        if state is not None and prev_to_cur is None:
+            raise ValueError("prev_to_cur is required when a state is given")
+        prev_bev = state.bev if state is not None else None
+        bev = self.encode(images, intrinsics, cam_to_ego, prev_bev, prev_to_cur)
+        b, c = int(bev.shape[0]), int(bev.shape[1])
+        empty = DetectorState(
+            bev,
+            bev.new_zeros((b, 0, c)),  # (B, 0, C)
+            bev.new_zeros((b, 0, self.cfg.num_points, 2)),  # (B, 0, P, 2)
+            torch.zeros((b, 0), dtype=torch.int64, device=bev.device),  # (B, 0)
+        )
+        return bev, empty
+
     def decode(
         self,
         bev: torch.Tensor,
