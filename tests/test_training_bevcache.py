@@ -119,3 +119,25 @@ def test_frozen_encoder_needs_a_fitting_checkpoint(encoder_run: Path, tmp_path: 
     cfg = config_from_dict({**raw, "stage1": {**TINY["stage1"], "freeze_encoder": True}})
     with pytest.raises(ValueError, match="does not hold this config's encoder"):
         train(cfg, 1, tmp_path, init=encoder_run, progress=False)
+
+
+def test_joined_training_sources() -> None:
+    """``data.source`` may join specs with '+': their sequences in order, clips over all of them;
+    an empty part or a sequence named twice is a clear error."""
+    from icmapper.training.loop import build_dataset, training_sequences
+
+    cfg = config_from_dict(
+        {"data": {"source": "sim:train:2 + sim-varied:train:1", "image_size": [16, 32]}}
+    )
+    names = [s.name for s in training_sequences(cfg)]
+    plain = [s.name for s in open_source("sim:train:2", image_size=(16, 32))]
+    assert names[:2] == plain and names[2].startswith("sim-varied-") and len(names) == 3
+    ds, _ = build_dataset(cfg, stage=1)
+    alone, _ = build_dataset(
+        config_from_dict({"data": {"source": "sim:train:2", "image_size": [16, 32]}}), stage=1
+    )
+    assert len(ds) > len(alone)
+    for bad, match in (("sim:train:2 +", "empty part"), ("sim:train:2+sim:train:2", "twice")):
+        cfg = config_from_dict({"data": {"source": bad, "image_size": [16, 32]}})
+        with pytest.raises(ValueError, match=match):
+            training_sequences(cfg)

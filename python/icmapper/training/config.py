@@ -20,8 +20,10 @@ from icmapper.settings import from_table, to_plain
 
 @dataclass(frozen=True)
 class DataConfig:
-    """Where clips come from: ``source`` is an ``open_source`` spec ("sim:train:64", "av2:PATH")
-    or "synthetic:N" (tiny random clips for tests and benchmarks)."""
+    """Where clips come from: ``source`` is an ``open_source`` spec ("sim:train:64", "av2:PATH"),
+    several joined by " + " (their sequences together, clips drawn uniformly over all of them:
+    "sim:train:128 + sim-varied:train:128"), or "synthetic:N" (tiny random clips for tests and
+    benchmarks)."""
 
     source: str = "sim:train:16"
     clip_len: int = 3

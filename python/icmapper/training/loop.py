@@ -57,18 +57,35 @@ def seed_everything(seed: int) -> None:
     torch.manual_seed(seed)
 
 
+#: Joins several ``open_source`` specs in ``data.source`` (spaces around it are optional).
+SOURCE_JOIN = "+"
+
+
 def training_sequences(cfg: TrainConfig) -> list[Any]:
-    """The sequences of ``cfg.data.source`` at the config's image size, seed and split file."""
+    """The sequences of ``cfg.data.source`` (each of its " + "-joined specs in order) at the
+    config's image size, seed and split file; ValueError for an empty part or a sequence name
+    that two parts share (the image and BEV caches are keyed by it)."""
     from icmapper.data.sources import open_source
 
-    return list(
-        open_source(
-            cfg.data.source,
+    specs = [part.strip() for part in cfg.data.source.split(SOURCE_JOIN)]
+    if not all(specs):
+        raise ValueError(f"data.source {cfg.data.source!r} has an empty part around '+'")
+    seqs: list[Any] = []
+    for spec in specs:
+        seqs += open_source(
+            spec,
             image_size=tuple(cfg.data.image_size),
             seed=cfg.seed,
             split_file=cfg.data.split_file or None,
         )
-    )
+    names = [s.name for s in seqs]
+    if len(set(names)) != len(names):
+        dup = sorted({n for n in names if names.count(n) > 1})
+        raise ValueError(
+            f"data.source {cfg.data.source!r} names sequences twice (e.g. {dup[0]!r}); "
+            "give each spec once"
+        )
+    return seqs
 
 
 def build_dataset(cfg: TrainConfig, stage: int) -> tuple[Dataset, Any]:
