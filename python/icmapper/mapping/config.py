@@ -13,6 +13,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field, fields
 from typing import Any
 
+from icmapper.mapping.crossings import CROSSING_MERGES
 from icmapper.settings import from_table, to_plain
 
 
@@ -29,6 +30,11 @@ class MapperConfig:
     smoothing: float = _f(0.5, "curve-fit smoothing s of the merge (scipy splprep semantics)")
     spacing: float = _f(1.0, "metres between stored map points")
     max_age: int = _f(3, "frames a lost track stays in the tracking buffer")
+    crossing_merge: str = _f(
+        "average",
+        "how an observed crossing merges into its instance: 'average' (complete views: running "
+        "mean of the rings; views cut by the range edge: union) or 'union' (mapping.crossings)",
+    )
     positional_scale: float = _f(
         1.0, "metres; positional affinity exp(-chamfer/scale) (no query features, Post-Track)"
     )
@@ -87,6 +93,11 @@ class MapperConfig:
         for name in ("max_age", "reid_distance", "fusion_margin", "smoothing"):
             if not getattr(self, name) >= 0:
                 raise ValueError(f"MapperConfig.{name} must be >= 0, got {getattr(self, name)}")
+        if self.crossing_merge not in CROSSING_MERGES:
+            raise ValueError(
+                f"MapperConfig.crossing_merge must be one of {CROSSING_MERGES}, "
+                f"got {self.crossing_merge!r}"
+            )
         if not 0.0 < self.city_min_overlap <= 1.0:
             raise ValueError(
                 f"MapperConfig.city_min_overlap must be in (0, 1], got {self.city_min_overlap}"

@@ -16,7 +16,8 @@ Per frame (paper Fig. 2):
    new piece of an instance matched this frame maps into it);
 4. the global map is sampled in the patch expanded by ``fusion_margin`` (Rust ``sample_patch``);
 5. fusion of every tracked detection with the history of its id;
-6. merge into the global map (curve fit for polylines, union for crossings), or insert once the
+6. merge into the global map (curve fit for polylines; crossings by ``crossing_merge``: the
+   running mean of complete views, union of views cut by the range edge), or insert once the
    track has been seen in ``min_hits`` frames (tentative tracks keep one-off false positives out
    of the map; an extension like step 3).
 """
@@ -33,6 +34,7 @@ from numpy.typing import NDArray
 
 from icmapper.data.types import (
     Frame,
+    MapClass,
     PerceptionRange,
     RANGE_60x30,
     Sequence,
@@ -40,6 +42,7 @@ from icmapper.data.types import (
     pose_to_xy_yaw,
 )
 from icmapper.mapping.config import MapperConfig
+from icmapper.mapping.crossings import merge_crossing
 from icmapper.mapping.network_source import NetworkDetector
 from icmapper.mapping.reid import reidentify
 from icmapper.mapping.tracker import Tracker, positional_affinity
@@ -430,12 +433,25 @@ class Mapper:
     ) -> tuple[list[int], list[int]]:
         inserted: list[int] = []
         merged: list[int] = []
-        # Inserts now (a later detection of this frame may merge into a new instance), merges
-        # collected and run in one parallel merge_many call: the same map as merging in order.
+        # Inserts and crossing merges now (a later detection of this frame may merge into a new
+        # instance), polyline merges collected and run in one parallel merge_many call: the same
+        # map as merging in order.
         merge_items: list[tuple[int, int, NDArray[np.float64]]] = []  # (track, target, world)
         for j, tid in enumerate(track_ids.tolist()):
             world = ego_to_world(fused[j], pose)  # (P, 2)
             target = self._alias.get(tid, tid)  # the global instance this track maps into
+            if target in self._map and int(det.classes[j]) == MapClass.PED_CROSSING:
+                try:  # by the crossing rule (mapping.crossings)
+                    merge_crossing(
+                        self._map, target, world, fused[j], self.rng, frame_index,
+                        self.config.crossing_merge,
+                    )  # fmt: skip
+                except ValueError as exc:
+                    self._note_failure(frame_index, target, exc)
+                    continue
+                merged.append(target)
+                self.tracker.set_points(tid, world)
+                continue
             if target in self._map:
                 merge_items.append((tid, target, world))
                 continue

@@ -6,9 +6,9 @@ fractions of either instance's points lying within `buffer` metres of the other
 (`splice.overlap_fraction`; crossings also count points inside). The best candidate with overlap >=
 `min_overlap` absorbs the detection: a polyline by projection splicing (`splice.splice_polyline`:
 the overlapped part replaced by the detection, the parts beyond its ends kept, so the instance
-extends), a crossing by the engine's polygon union (`GlobalMap.merge`). Otherwise the detection is
-inserted as a new instance. Detections are handled one at a time, in order, so two detections of
-one frame may merge into the same instance.
+extends), a crossing by the shared crossing rule (``crossing_merge``, `mapping.crossings`).
+Otherwise the detection is inserted as a new instance. Detections are handled one at a time, in
+order, so two detections of one frame may merge into the same instance.
 
 `StepResult.track_ids` holds the global instance each detection went into (the method has no
 tracks; this is what it would report as identity).
@@ -24,6 +24,7 @@ from icmapper.data.types import Frame, MapClass, PerceptionRange, RANGE_60x30
 from icmapper.mapping.baselines.common import new_global_map, read_frame
 from icmapper.mapping.baselines.splice import overlap_fraction, splice_polyline
 from icmapper.mapping.config import MapperConfig
+from icmapper.mapping.crossings import merge_crossing
 from icmapper.mapping.methods import MethodInfo, register_method
 from icmapper.mapping.types import DetectionSource, StepResult
 
@@ -85,7 +86,10 @@ class PolyMerge:
                 inserted.append(best)
             else:
                 if closed:
-                    self.map.merge(best, world, frame.index)
+                    rule = self.config.crossing_merge
+                    merge_crossing(
+                        self.map, best, world, dets.points[i], self.range, frame.index, rule
+                    )
                 else:
                     _, stored = self.map.get(best)
                     new = splice_polyline(np.asarray(stored, np.float64), world, self.buffer)

@@ -6,8 +6,9 @@ As a tracking baseline it is the paper's Post-Track: ids come after detection, f
 `max_age` unseen frames. As a mapping method it uses those ids in place of IC-Mapper's learned
 association and has no fusion: each detection is inserted into the global map under its track id
 (new track) or merged into that instance with the same engine merge as IC-Mapper (curve fit for
-polylines, union for crossings). A track that is lost and re-found gets a new id, and so a second,
-overlapping global instance: that is the baseline's known weakness.
+polylines; crossings by ``crossing_merge``, `mapping.crossings`). A track that is lost and
+re-found gets a new id, and so a second, overlapping global instance: that is the baseline's known
+weakness.
 """
 
 from __future__ import annotations
@@ -17,9 +18,10 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numpy.typing import NDArray
 
-from icmapper.data.types import Frame, PerceptionRange, RANGE_60x30
+from icmapper.data.types import Frame, MapClass, PerceptionRange, RANGE_60x30
 from icmapper.mapping.baselines.common import new_global_map, read_frame
 from icmapper.mapping.config import MapperConfig
+from icmapper.mapping.crossings import merge_crossing
 from icmapper.mapping.methods import MethodInfo, register_method
 from icmapper.mapping.tracker import Tracker, positional_affinity
 from icmapper.mapping.types import DetectionSource, StepResult
@@ -50,6 +52,7 @@ class PostTrack:
         self.source = source
         self.config = cfg
         self.score_threshold = cfg.baseline_threshold
+        self.range = rng
         self.tracker = Tracker(
             threshold=float(np.exp(-cfg.gate / cfg.positional_scale)), max_age=cfg.max_age
         )
@@ -71,16 +74,25 @@ class PostTrack:
         inserted: list[int] = []
         merged: list[int] = []
         for i, tid in enumerate(ids.tolist()):
-            if self._update(int(tid), int(dets.classes[i]), inp.world[i], frame.index):
+            if self._update(
+                int(tid), int(dets.classes[i]), inp.world[i], dets.points[i], frame.index
+            ):
                 merged.append(tid)
             else:
                 inserted.append(tid)
         return StepResult(frame.index, dets, ids, dets.points.copy(), inserted, merged)
 
-    def _update(self, tid: int, cls: int, world: NDArray[np.float64], frame: int) -> bool:
-        """Puts one detection (n, 2) world into the map under id `tid`; True if it was merged."""
+    def _update(
+        self, tid: int, cls: int, world: NDArray[np.float64], ego: NDArray[np.floating], frame: int
+    ) -> bool:
+        """Puts one detection (n, 2) world (``ego``: the same points in the ego frame) into the map
+        under id `tid`; True if it was merged."""
         if tid in self.map:
-            self.map.merge(tid, world, frame)
+            if MapClass(cls).closed:
+                rule = self.config.crossing_merge
+                merge_crossing(self.map, tid, world, ego, self.range, frame, rule)
+            else:
+                self.map.merge(tid, world, frame)
             return True
         self.map.insert_with_id(tid, cls, world, frame)
         return False

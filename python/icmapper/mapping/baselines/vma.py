@@ -35,7 +35,9 @@ class VmaMerge(PostTrack):
 
     name = "vma"
 
-    def _update(self, tid: int, cls: int, world: NDArray[np.float64], frame: int) -> bool:
+    def _update(
+        self, tid: int, cls: int, world: NDArray[np.float64], ego: NDArray[np.floating], frame: int
+    ) -> bool:
         if tid not in self.map:
             self.map.insert_with_id(tid, cls, world, frame)
             return False
