@@ -14,7 +14,7 @@ stale or corrupt file is recomputed.
 from __future__ import annotations
 
 import hashlib
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import numpy as np
@@ -56,26 +56,31 @@ def _load(path: Path, frames: int) -> torch.Tensor | None:
     return bev
 
 
-@torch.no_grad()
-def encode_sequence(detector: MapDetector, item: dict) -> torch.Tensor:
-    """The fused BEV of every frame of one sequence item (``SequenceDataset``), streamed as at
-    inference -> (T, C, X, Y) float16."""
+def stream_bev(detector: MapDetector, item: dict) -> Iterator[torch.Tensor]:
+    """The fused BEV (1, C, X, Y) of each frame of one sequence item (``SequenceDataset``),
+    streamed as at inference: the encoder only (``MapDetector.encode_stream``), the memory carried
+    from frame to frame. Call it under ``torch.no_grad()`` unless gradients are wanted."""
     from icmapper.training.objectives import prev_to_cur
 
     poses = item["poses"][None]  # (1, T, 4, 4)
-    prev, out = None, []
+    state = None
     for t in range(item["images"].shape[0]):
         motion = prev_to_cur(poses, t) if t > 0 else None
-        bev = detector.encode(
+        bev, state = detector.encode_stream(
             item["images"][None, t],
             item["intrinsics"][None, t],
             item["cam_to_ego"][None, t],
-            prev,
+            state,
             motion,
         )  # fmt: skip  (1, C, X, Y)
-        out.append(bev[0].half())
-        prev = bev
-    return torch.stack(out)  # (T, C, X, Y)
+        yield bev
+
+
+@torch.no_grad()
+def encode_sequence(detector: MapDetector, item: dict) -> torch.Tensor:
+    """The fused BEV of every frame of one sequence item (``stream_bev``) -> (T, C, X, Y)
+    float16."""
+    return torch.stack([bev[0].half() for bev in stream_bev(detector, item)])  # (T, C, X, Y)
 
 
 def encode_sequences(

@@ -144,7 +144,7 @@ def seg_iou(checkpoint: Path, spec: str) -> dict[str, float]:
     from icmapper.data.datasets import SequenceDataset
     from icmapper.data.sources import open_source
     from icmapper.models.network import load_network
-    from icmapper.training.objectives import prev_to_cur
+    from icmapper.training.bevcache import stream_bev
 
     loaded = load_network(checkpoint)
     det, cfg, rng = loaded.net.detector, loaded.model, loaded.rng
@@ -156,13 +156,8 @@ def seg_iou(checkpoint: Path, spec: str) -> dict[str, float]:
     with torch.no_grad():
         for i in range(len(ds)):
             item = ds[i]
-            state = None
-            poses = item["poses"][None]  # (1, T, 4, 4)
-            for t in range(item["images"].shape[0]):
-                motion = prev_to_cur(poses, t) if t > 0 else None
-                out, state = det(item["images"][None, t], item["intrinsics"][None, t],
-                                 item["cam_to_ego"][None, t], state, motion)  # fmt: skip
-                pred = (det.seg(out.bev)[0] > 0).numpy()  # (K, X, Y)
+            for t, bev in enumerate(stream_bev(det, item)):
+                pred = (det.seg(bev)[0] > 0).numpy()  # (K, X, Y)
                 g = item["gt"][t]
                 tgt = rasterise(g["points"], g["classes"], cfg.bev_x, cfg.bev_y, rng.half_x,
                                 rng.half_y, cfg.num_classes).numpy() > 0.5  # fmt: skip
