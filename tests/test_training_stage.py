@@ -52,6 +52,18 @@ class FakeMap:
     def merge(self, i: int, pts: np.ndarray, frame: int = 0) -> None:
         self.items[i] = (self.items[i][0], pts)
 
+    def get(self, i: int) -> tuple[int, np.ndarray]:
+        return self.items[i]
+
+    def info(self, i: int) -> dict:
+        return {"observations": 1}
+
+    def replace(self, i: int, pts: np.ndarray, frame: int = 0) -> None:
+        from icmapper.geom import resample_many
+
+        n = self.items[i][1].shape[0]  # keeps the sampled size of sample_patch
+        self.items[i] = (self.items[i][0], resample_many(np.asarray(pts)[None], n, True)[0])
+
     def sample_patch(self, pose, half, margin=20.0, n_points=20):
         x, y, yaw = pose
         c, s = np.cos(yaw), np.sin(yaw)

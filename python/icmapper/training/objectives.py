@@ -16,7 +16,9 @@ import numpy as np
 import torch
 from torch import nn
 
-from icmapper.data.types import ego_to_world, pose_to_xy_yaw
+from icmapper.data.types import MapClass, ego_to_world, pose_to_xy_yaw
+from icmapper.mapping.config import MapperConfig
+from icmapper.mapping.crossings import merge_crossing
 from icmapper.models.detector import DetectorOutput, DetectorState, MapDetector
 from icmapper.models.losses import (
     DetectionCriterion,
@@ -262,7 +264,8 @@ class Stage2Objective(nn.Module):
     """forward(batch) -> {'loss', 'fusion', 'fused'}: per sample, frames in order; detections
     above the score threshold are matched to the GT (their IDs are the GT IDs: oracle identities
     for training), fused with the history of the same ID sampled from the online global map, and the
-    fused points (detached) merged into the map."""
+    fused points (detached) merged into the map (crossings by the ``[mapper]`` table's
+    ``crossing_merge``, as at inference)."""
 
     def __init__(
         self, net: ICMapperNet, cfg: TrainConfig, map_factory: Callable[[], Any] | None = None
@@ -277,6 +280,8 @@ class Stage2Objective(nn.Module):
             cfg.model.num_classes, cfg.stage1.cls_weight, cfg.stage1.pts_weight
         )
         self.cfg = cfg
+        # the online map merges crossings by the rule the mapper will use (the [mapper] table)
+        self.crossing_merge = MapperConfig.from_dict(cfg.mapper).crossing_merge
         for mod in (self.detector, self.association):
             mod.requires_grad_(False)
 
@@ -380,7 +385,9 @@ class Stage2Objective(nn.Module):
                 for j, i in enumerate(ids):
                     world = ego_to_world(final[j], pose)  # (P, 2)
                     try:
-                        if i in gmap:
+                        if i in gmap and int(cls[j]) == MapClass.PED_CROSSING:
+                            merge_crossing(gmap, i, world, final[j], r, t, self.crossing_merge)
+                        elif i in gmap:
                             gmap.merge(i, world, frame=t)
                         else:
                             gmap.insert_with_id(i, int(cls[j]), world, frame=t)
