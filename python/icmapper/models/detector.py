@@ -177,10 +177,7 @@ class MapDetector(nn.Module):
         prev_to_cur (B, 4, 4) previous ego -> current ego (= inv(pose_t) @ pose_{t-1}).
         Returns the detections and the state for the next frame.
         """
-        if state is not None and prev_to_cur is None:
-            raise ValueError("prev_to_cur is required when a state is given")
-        prev_bev = state.bev if state is not None else None
-        bev = self.encode(images, intrinsics, cam_to_ego, prev_bev, prev_to_cur)
+        bev, _ = self.encode_stream(images, intrinsics, cam_to_ego, state, prev_to_cur)
         return self.decode(bev, state, prev_to_cur)
 
     def encode_stream(
