@@ -70,6 +70,42 @@ def test_cache_holds_the_streamed_bev(encoder_run: Path, tmp_path: Path) -> None
     assert bev.shape == (len(seqs[0]), 16, 20, 10) and bev.dtype == torch.float16
 
 
+def test_ranks_encode_their_share_of_the_cache(
+    encoder_run: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """With data-parallel ranks each sequence is encoded once, by the rank whose share it is; the
+    others read it from the cache after the barrier (two ranks played in turn in one process)."""
+    import icmapper.training.bevcache as bevcache
+
+    cfg = _cfg()
+    net = _net(cfg, encoder_run)
+    seqs = list(open_source("sim:val:3", image_size=(32, 64)))
+    whole = encode_sequences(net.detector, seqs, cfg.perception_range, tmp_path / "a", (32, 64))
+    calls: list[int] = []  # frames of each encoded sequence
+    real = bevcache.encode_sequence
+
+    def counted(detector: object, item: dict) -> torch.Tensor:
+        calls.append(int(item["poses"].shape[0]))
+        return real(detector, item)
+
+    monkeypatch.setattr(bevcache, "encode_sequence", counted)
+    root, size = tmp_path / "b", (32, 64)
+
+    def rank0_then_barrier() -> None:  # rank 1 waits at the barrier while rank 0 runs
+        assert len(calls) == 1  # rank 1 encoded its share: sequence 1
+        bevs0 = encode_sequences(net.detector, seqs, cfg.perception_range, root, size,
+                                 shard=(0, 2))  # fmt: skip
+        assert len(calls) == 3  # rank 0: sequences 0 and 2; sequence 1 read from the cache
+        assert all(torch.equal(a, b) for a, b in zip(bevs0, whole, strict=True))
+
+    bevs1 = encode_sequences(net.detector, seqs, cfg.perception_range, root, size,
+                             shard=(1, 2), wait=rank0_then_barrier)  # fmt: skip
+    assert sorted(calls) == sorted(len(s) for s in seqs)  # each sequence encoded once
+    assert all(torch.equal(a, b) for a, b in zip(bevs1, whole, strict=True))
+    with pytest.raises(ValueError, match="bad shard"):
+        encode_sequences(net.detector, seqs, cfg.perception_range, root, size, shard=(2, 2))
+
+
 def test_objective_on_cached_bev_matches_images(encoder_run: Path, tmp_path: Path) -> None:
     cfg = _cfg()
     net = _net(cfg, encoder_run)

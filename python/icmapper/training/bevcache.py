@@ -8,7 +8,9 @@ sequence, exactly as inference streams it, and keeps every frame's fused BEV (fl
 folder keyed by the encoder's parameter digest; ``BevClipDataset`` serves clips of those BEVs with
 the clips' poses and ground truth, in the layout of ``ClipDataset`` with ``bev`` (T, C, X, Y) in
 place of the images. Cache files are written atomically and read with ``weights_only=True``; a
-stale or corrupt file is recomputed.
+stale or corrupt file is recomputed. Data-parallel ranks each encode their share of the
+sequences, then read the others' after a barrier; the encoder runs on its own device and the cache
+is kept on the CPU.
 """
 
 from __future__ import annotations
@@ -62,14 +64,15 @@ def stream_bev(detector: MapDetector, item: dict) -> Iterator[torch.Tensor]:
     from frame to frame. Call it under ``torch.no_grad()`` unless gradients are wanted."""
     from icmapper.training.objectives import prev_to_cur
 
-    poses = item["poses"][None]  # (1, T, 4, 4)
+    dev = next(detector.parameters()).device  # the item's tensors go where the encoder is
+    poses = item["poses"][None].to(dev)  # (1, T, 4, 4)
     state = None
     for t in range(item["images"].shape[0]):
         motion = prev_to_cur(poses, t) if t > 0 else None
         bev, state = detector.encode_stream(
-            item["images"][None, t],
-            item["intrinsics"][None, t],
-            item["cam_to_ego"][None, t],
+            item["images"][None, t].to(dev),
+            item["intrinsics"][None, t].to(dev),
+            item["cam_to_ego"][None, t].to(dev),
             state,
             motion,
         )  # fmt: skip  (1, C, X, Y)
@@ -79,8 +82,8 @@ def stream_bev(detector: MapDetector, item: dict) -> Iterator[torch.Tensor]:
 @torch.no_grad()
 def encode_sequence(detector: MapDetector, item: dict) -> torch.Tensor:
     """The fused BEV of every frame of one sequence item (``stream_bev``) -> (T, C, X, Y)
-    float16."""
-    return torch.stack([bev[0].half() for bev in stream_bev(detector, item)])  # (T, C, X, Y)
+    float16 on the CPU."""
+    return torch.stack([bev[0].half().cpu() for bev in stream_bev(detector, item)])
 
 
 def encode_sequences(
@@ -91,26 +94,50 @@ def encode_sequences(
     image_size: tuple[int, int],
     image_cache: str | Path | None = None,
     log: Callable[[str], None] | None = None,
+    shard: tuple[int, int] = (0, 1),
+    wait: Callable[[], None] | None = None,
 ) -> list[torch.Tensor]:
     """Per sequence its BEVs (T, C, X, Y) float16, read from ``cache_dir/bev-<digest>/`` or
-    computed there (the detector's encoder in eval mode, no gradients)."""
+    computed there (the detector's encoder in eval mode, no gradients).
+
+    With ``shard = (rank, world_size)`` (data-parallel training) this process encodes only the
+    missing sequences i with i % world_size == rank, calls ``wait`` (a barrier: every rank has
+    written its share), then reads the others' from the cache; a sequence still missing then
+    (another rank failed to write it) is encoded here."""
+    rank, world = shard
+    if not 0 <= rank < world:
+        raise ValueError(f"encode_sequences: bad shard {shard}; expected (rank, world_size)")
     was_training = detector.training
     detector.eval()
     root = Path(cache_dir) / f"bev-{encoder_digest(detector, image_size)}"
     root.mkdir(parents=True, exist_ok=True)
     ds = SequenceDataset(sequences, rng, cache_dir=image_cache)
-    bevs = []
+    paths = [
+        root / f"{hashlib.sha256(seq.name.encode()).hexdigest()[:12]}-{i:05d}.pt"
+        for i, seq in enumerate(sequences)
+    ]
+    mine: dict[int, torch.Tensor] = {}
+
+    def encode(i: int) -> torch.Tensor:
+        bev = encode_sequence(detector, ds[i])
+        with atomic_open(paths[i], "wb") as fh:
+            torch.save({"bev": bev, "name": sequences[i].name}, fh)
+        return bev
+
     try:
+        for i in range(rank, len(sequences), world):  # this rank's share
+            bev = _load(paths[i], len(sequences[i]))
+            mine[i] = bev if bev is not None else encode(i)
+            if log is not None and (i + 1) % 8 == 0:
+                log(f"BEV cache: {i + 1}/{len(sequences)} sequences in {root}")
+        if wait is not None:
+            wait()
+        bevs = []
         for i, seq in enumerate(sequences):
-            path = root / f"{hashlib.sha256(seq.name.encode()).hexdigest()[:12]}-{i:05d}.pt"
-            bev = _load(path, len(seq))
+            bev = mine.get(i)
             if bev is None:
-                bev = encode_sequence(detector, ds[i])
-                with atomic_open(path, "wb") as fh:
-                    torch.save({"bev": bev, "name": seq.name}, fh)
-                if log is not None and (i + 1) % 8 == 0:
-                    log(f"BEV cache: {i + 1}/{len(sequences)} sequences encoded into {root}")
-            bevs.append(bev)
+                bev = _load(paths[i], len(seq))
+            bevs.append(bev if bev is not None else encode(i))
     finally:
         detector.train(was_training)
     return bevs

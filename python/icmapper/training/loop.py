@@ -150,9 +150,13 @@ def load_encoder(net: ICMapperNet, path: Path) -> None:
     net.load_state_dict(fits, strict=False)
 
 
-def bev_dataset(cfg: TrainConfig, net: ICMapperNet, out: Path) -> tuple[Dataset, Any]:
-    """The cached-BEV clips of ``cfg.data.source`` (encoded now where the cache lacks them)."""
+def bev_dataset(
+    cfg: TrainConfig, net: ICMapperNet, out: Path, info: DistInfo | None = None
+) -> tuple[Dataset, Any]:
+    """The cached-BEV clips of ``cfg.data.source`` (encoded now where the cache lacks them; with
+    data-parallel ranks ``info``, each rank encodes its share and then reads the others')."""
     seqs = training_sequences(cfg)
+    ranks = info is not None and info.enabled
     bevs = encode_sequences(
         net.detector,
         seqs,
@@ -160,7 +164,9 @@ def bev_dataset(cfg: TrainConfig, net: ICMapperNet, out: Path) -> tuple[Dataset,
         cfg.data.bev_cache_dir or out / "bev-cache",
         tuple(cfg.data.image_size),
         image_cache=cfg.data.cache_dir or None,
-        log=print,
+        log=print if info is None or info.is_main else None,
+        shard=(info.rank, info.world_size) if ranks and info is not None else (0, 1),
+        wait=barrier if ranks else None,
     )
     ds = BevClipDataset(seqs, bevs, cfg.data.clip_len, cfg.perception_range, seed=cfg.seed)
     return ds, collate_bev_clips
@@ -295,7 +301,7 @@ def train(
             if module is not None:
                 module.requires_grad_(False)
         if dataset is None:
-            dataset = bev_dataset(cfg, net, out)
+            dataset = bev_dataset(cfg, net, out, info)
     kind: type[torch.nn.Module] = Stage1Objective if stage == 1 else Stage2Objective
     if stage == 1 and cfg.stage1.freeze_encoder and cfg.model.instances == "segmentation":
         kind = SegAssociationObjective  # the instances come from the frozen segmentation head
