@@ -60,3 +60,56 @@ def test_ddp_two_cpu_replicas_stay_identical(tmp_path: Path) -> None:
     assert set(digests) == {"0", "1"}, proc.stdout
     assert digests["0"] == digests["1"]
     assert (tmp_path / "out" / "stage1.pt").is_file()
+
+
+def _toml(raw: dict) -> str:
+    """A TOML text of a config dict (top-level keys, then one table per dict value)."""
+
+    def value(v: object) -> str:
+        if isinstance(v, bool):
+            return "true" if v else "false"
+        if isinstance(v, str):
+            return f'"{v}"'
+        if isinstance(v, list):
+            return "[" + ", ".join(value(x) for x in v) + "]"
+        return repr(v)
+
+    top = [f"{k} = {value(v)}" for k, v in raw.items() if not isinstance(v, dict)]
+    tables = [
+        f"[{name}]\n" + "\n".join(f"{k} = {value(v)}" for k, v in table.items())
+        for name, table in raw.items()
+        if isinstance(table, dict)
+    ]
+    return "\n".join(top) + "\n" + "\n".join(tables) + "\n"
+
+
+@pytest.mark.timeout(240)
+def test_ddp_frozen_encoder_ranks_share_the_bev_cache(tmp_path: Path) -> None:
+    """Two CPU ranks training on cached BEVs of a frozen encoder under torchrun: the ranks encode
+    their shares, meet at the barrier, read each other's files (one per sequence) and end with
+    identical replicas (that each sequence is encoded once: test_training_bevcache)."""
+    from icmapper.testing.configs import tiny_raw
+    from icmapper.training.config import config_from_dict
+    from icmapper.training.loop import train
+
+    raw = tiny_raw(
+        model={"num_cameras": 6, "channels": 16},
+        data={"source": "sim:val:3", "bev_cache_dir": str(tmp_path / "bev")},
+        stage1={"steps": 2},
+    )
+    train(config_from_dict(raw), 1, tmp_path / "encoder", progress=False)
+    cfg = tmp_path / "frozen.toml"
+    cfg.write_text(_toml({**raw, "stage1": {**raw["stage1"], "freeze_encoder": True}}))
+    cmd = [
+        sys.executable, "-m", "torch.distributed.run", "--nproc_per_node", "2",
+        "--master_addr", "127.0.0.1", "--master_port", str(_free_port()),
+        "-m", "icmapper", "train", "--config", str(cfg), "--out", str(tmp_path / "out"),
+        "--init", str(tmp_path / "encoder" / "stage1.pt"), "--no-progress",
+    ]  # fmt: skip
+    env = {**os.environ, "OMP_NUM_THREADS": "1", "CUDA_VISIBLE_DEVICES": ""}
+    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=220, env=env)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    digests = dict(re.findall(r"rank (\d)/2: parameter digest ([0-9a-f]{64})", proc.stdout))
+    assert set(digests) == {"0", "1"} and digests["0"] == digests["1"], proc.stdout
+    (cache,) = (tmp_path / "bev").glob("bev-*")
+    assert len(list(cache.glob("*.pt"))) == 3
