@@ -67,6 +67,60 @@ def test_upsampled_coarse_head() -> None:
         assert best < 0.6, (g, best)
 
 
+def _rect(x0: float, x1: float, y0: float, y1: float) -> np.ndarray:
+    return np.array([[x0, y0], [x1, y0], [x1, y1], [x0, y1]], np.float64)
+
+
+def _crossing_iou(inst_pts: np.ndarray, truth: list[np.ndarray]) -> list[float]:
+    """For each true crossing, the best shapely IoU with a vectorised crossing."""
+    from shapely.geometry import Polygon
+
+    preds = [Polygon(q) for q in inst_pts]
+    out = []
+    for t in truth:
+        g = Polygon(t)
+        out.append(max((g.intersection(q).area / g.union(q).area for q in preds), default=0.0))
+    return out
+
+
+@pytest.mark.parametrize(
+    "truth",
+    [
+        # the four arms of an intersection, touching at its corners: one ring-shaped mask
+        [_rect(6, 10, -6, 6), _rect(-10, -6, -6, 6), _rect(-6, 6, 6, 10), _rect(-6, 6, -10, -6)],
+        # two crossings meeting at a corner: an L-shaped mask
+        [_rect(-4, 0, -12, 4), _rect(0, 14, 4, 8)],
+    ],
+    ids=["ring", "L"],
+)
+def test_touching_crossings_are_split(truth: list[np.ndarray]) -> None:
+    """Crossings whose masks touch come back one rectangle each (shapely IoU), where the plain
+    rectangle of the joined mask would cover them all."""
+    pts = np.stack([resample_polyline(t, 20, closed=True) for t in truth])
+    mask = rasterise(
+        torch.from_numpy(pts), torch.zeros(len(truth), dtype=torch.long), 50, 25, HX, HY
+    )
+    prob = 0.05 + 0.9 * mask.numpy()
+    inst = vectorise(prob, HX, HY)
+    cross = inst.points[inst.classes == 0]
+    assert len(cross) == len(truth)
+    assert min(_crossing_iou(cross, truth)) > 0.45
+    joined = vectorise(prob, HX, HY, VectoriseParams(rectangularity=0.0))
+    assert (joined.classes == 0).sum() == 1  # without the split: one rectangle over them all
+    assert max(_crossing_iou(joined.points[joined.classes == 0], truth)) < 0.4
+
+
+def test_rectangular_crossing_is_not_split() -> None:
+    """A single tilted crossing fills its rectangle: it stays one instance."""
+    c, s = np.cos(0.5), np.sin(0.5)
+    rect = _rect(-7, 7, -2, 2) @ np.array([[c, s], [-s, c]])
+    pts = resample_polyline(rect, 20, closed=True)[None]
+    mask = rasterise(torch.from_numpy(pts), torch.zeros(1, dtype=torch.long), 50, 25, HX, HY)
+    inst = vectorise(0.05 + 0.9 * mask.numpy(), HX, HY)
+    assert (inst.classes == 0).sum() == 1
+    assert _crossing_iou(inst.points[inst.classes == 0], [rect])[0] > 0.7
+
+
 def test_empty_and_bad_input() -> None:
     empty = vectorise(np.zeros((3, 50, 25)), HX, HY)
     assert len(empty) == 0 and empty.points.shape == (0, 20, 2)
@@ -78,6 +132,10 @@ def test_empty_and_bad_input() -> None:
         vectorise(np.zeros((50, 25)), HX, HY)
     with pytest.raises(ValueError, match="threshold"):
         VectoriseParams(threshold=1.5)
+    with pytest.raises(ValueError, match="rectangularity"):
+        VectoriseParams(rectangularity=1.5)
+    with pytest.raises(ValueError, match="corner_tolerance"):
+        VectoriseParams(corner_tolerance=-1.0)
 
 
 def test_resample_polyline() -> None:

@@ -10,7 +10,8 @@ from the masks instead (``model.instances = "segmentation"``):
   points; branches shorter than ``min_length`` metres are dropped;
 - each connected crossing mask becomes the minimum rotated rectangle of its cells, shrunk by the
   target's line radius (the targets mark cells within that radius of the contour), resampled to P
-  points along its closed contour;
+  points along its closed contour; a mask of several touching crossings (around an intersection,
+  or meeting at a corner) is first cut into one part per crossing (``_crossing_parts``);
 - an instance's score is the mean probability of its cells (its skeleton for lines).
 
 Everything here is numpy / scipy / scikit-image / shapely on one frame; no gradients.
@@ -18,10 +19,15 @@ Everything here is numpy / scipy / scikit-image / shapely on one frame; no gradi
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
+
+if TYPE_CHECKING:
+    from shapely.geometry import Polygon
 
 #: Class index of crossings (closed contours); the other classes are open polylines.
 CROSSING = 0
@@ -37,6 +43,9 @@ class VectoriseParams:
     min_length: float = 2.0  # shorter line branches are dropped
     min_area: float = 2.0  # smaller crossing components (m^2) are dropped
     shrink: float = 0.9  # crossing rectangles shrink by this (the target's line radius)
+    rectangularity: float = 0.6  # a crossing mask filling less of its rectangle is split (0: never)
+    corner_tolerance: float = 2.0  # Douglas-Peucker tolerance that finds a split mask's corners
+    max_hole: float = 2.0  # a crossing mask around a hole of larger inscribed radius is split
     simplify: float = 0.2  # Douglas-Peucker tolerance of line branches before resampling
     num_points: int = 20  # points per instance
 
@@ -45,7 +54,11 @@ class VectoriseParams:
             raise ValueError("vectorise: upsample must be >= 1 and num_points >= 2")
         if not 0.0 < self.threshold < 1.0:
             raise ValueError(f"vectorise: threshold must be in (0, 1), got {self.threshold}")
-        for key in ("min_length", "min_area", "shrink", "simplify"):
+        if not 0.0 <= self.rectangularity <= 1.0:
+            raise ValueError(
+                f"vectorise: rectangularity must be in [0, 1], got {self.rectangularity}"
+            )
+        for key in ("min_length", "min_area", "shrink", "simplify", "corner_tolerance", "max_hole"):
             if not getattr(self, key) >= 0:
                 raise ValueError(f"vectorise: {key} must be >= 0, got {getattr(self, key)}")
 
@@ -103,6 +116,112 @@ def _order_branch(cells: NDArray[np.int64]) -> NDArray[np.int64]:
     return np.asarray(path, dtype=np.int64)
 
 
+def _fill(xy: NDArray[np.float64], half_cell: float) -> float:
+    """The fraction of the minimum rotated rectangle of cell centres ``xy`` (M, 2), grown by half a
+    cell, that the M cells cover."""
+    from shapely.geometry import MultiPoint
+
+    rect = MultiPoint(xy).minimum_rotated_rectangle.buffer(half_cell, join_style="mitre")
+    return float(len(xy) * (2 * half_cell) ** 2 / rect.area) if rect.area > 0 else 1.0
+
+
+def _band_rectangle(xy: NDArray[np.float64], half_cell: float) -> Polygon:
+    """A rectangle fitted robustly to the cells ``xy`` (M, 2) of one part of a split crossing
+    mask: along its principal axis from the 1st to the 99th percentile, across it the width the
+    10th-90th percentiles span in a uniform band. The corner a part shares with its neighbour sits
+    in the tails and does not widen it, as it would widen the minimum rotated rectangle."""
+    from shapely.geometry import Polygon
+
+    centre = xy.mean(0)
+    _, _, vt = np.linalg.svd(xy - centre, full_matrices=False)
+    along, across = (xy - centre) @ vt[0], (xy - centre) @ vt[1]  # (M,), (M,)
+    a0, a1 = np.percentile(along, [1, 99]) + np.array([-half_cell, half_cell])
+    c10, c90 = np.percentile(across, [10, 90])
+    mid, w = 0.5 * (c10 + c90), 0.5 * (c90 - c10) / 0.8 + half_cell
+    corners = [(a0, mid - w), (a1, mid - w), (a1, mid + w), (a0, mid + w)]
+    return Polygon([centre + u * vt[0] + v * vt[1] for u, v in corners])
+
+
+def _crossing_parts(
+    comp: NDArray[np.bool_],
+    metres: Callable[[NDArray[np.int64]], NDArray[np.float64]],
+    p: VectoriseParams,
+    cell_area: float,
+) -> list[NDArray[np.int64]]:
+    """The cells (M_i, 2) of each crossing in one connected crossing mask ``comp`` (X, Y).
+
+    Crossings that touch (the arms of an intersection, often a ring around it) form one mask whose
+    rectangle would cover the whole intersection. Holes of inscribed radius up to ``max_hole`` are
+    filled first (the outline mask of one wide crossing). A mask around a wider hole is cut along
+    the sides of the hole's convex hull; a mask that fills less than ``rectangularity`` of its
+    rectangle along the straight runs of its skeleton (branches shorter than ``min_length``
+    dropped). Both are found by Douglas-Peucker with ``corner_tolerance``. Every cell goes to its
+    nearest side or run, then the two parts whose union is most rectangular are joined while it
+    stays above ``rectangularity``."""
+    from scipy import ndimage
+    from shapely.geometry import LineString, MultiPoint, Polygon
+    from skimage.morphology import skeletonize
+
+    half = 0.5 * float(np.sqrt(cell_area))
+    # holes narrower than ``max_hole`` are the unpainted inside of one crossing's outline mask;
+    # a wider one is the middle of an intersection the crossings surround
+    holes = ndimage.binary_fill_holes(comp) & ~comp
+    hole_radius = ndimage.distance_transform_edt(holes) * 2 * half  # (X, Y) metres
+    labels, n = ndimage.label(holes, _K8)
+    wide = ndimage.maximum(hole_radius, labels, np.arange(1, n + 1)) if n else np.zeros(0)
+    comp = comp | (holes & ~np.isin(labels, 1 + np.flatnonzero(np.asarray(wide) > p.max_hole)))
+    cells = np.argwhere(comp)  # (M, 2)
+    ring = bool(np.any(np.asarray(wide) > p.max_hole))
+    if p.rectangularity <= 0 or (not ring and _fill(metres(cells), half) >= p.rectangularity):
+        return [cells]
+    starts: list[NDArray[np.float64]] = []
+    ends: list[NDArray[np.float64]] = []
+
+    def add(v: NDArray[np.float64]) -> None:  # (V, 2) polyline -> its segments
+        starts.extend(v[:-1])
+        ends.extend(v[1:])
+
+    if ring:  # around an intersection: the crossings lie along the sides of its hole
+        for h in 1 + np.flatnonzero(np.asarray(wide) > p.max_hole):
+            hull = MultiPoint(metres(np.argwhere(labels == h))).convex_hull
+            if isinstance(hull, Polygon):
+                add(np.asarray(hull.exterior.simplify(p.corner_tolerance).coords, np.float64))
+    else:  # along the straight runs of its skeleton
+        skel = skeletonize(comp)
+        degree = ndimage.convolve(skel.astype(np.int64), _K8, mode="constant") - 1
+        junctions = ndimage.binary_dilation(skel & (degree >= 3), _K8) & skel
+        branches, nb = ndimage.label(skel & ~junctions, _K8)
+        for b in range(1, nb + 1):
+            path = _order_branch(np.argwhere(branches == b))
+            if len(path) < 2:
+                continue
+            line = LineString(metres(path))
+            if line.length >= p.min_length:
+                add(np.asarray(line.simplify(p.corner_tolerance).coords, np.float64))
+    if len(starts) < 2:
+        return [cells]
+    a, b_ = np.asarray(starts), np.asarray(ends)  # (S, 2) segment ends
+    xy = metres(cells)  # (M, 2)
+    ab = b_ - a  # (S, 2)
+    t = np.einsum("msd,sd->ms", xy[:, None] - a[None], ab) / np.maximum((ab**2).sum(-1), 1e-12)
+    near = a[None] + np.clip(t, 0.0, 1.0)[..., None] * ab[None]  # (M, S, 2)
+    owner = np.linalg.norm(xy[:, None] - near, axis=-1).argmin(1)  # (M,)
+    parts = [cells[owner == s] for s in range(len(a)) if np.any(owner == s)]
+    while len(parts) > 1:
+        best, pair = p.rectangularity, None
+        for i in range(len(parts)):
+            for j in range(i + 1, len(parts)):
+                f = _fill(metres(np.vstack([parts[i], parts[j]])), half)
+                if f >= best:
+                    best, pair = f, (i, j)
+        if pair is None:
+            break
+        i, j = pair
+        parts[i] = np.vstack([parts[i], parts[j]])
+        del parts[j]
+    return [q for q in parts if len(q) * cell_area >= p.min_area]
+
+
 def vectorise(
     prob: NDArray[np.floating],
     half_x: float,
@@ -147,16 +266,23 @@ def vectorise(
                 comp = labels == c
                 if comp.sum() * sx * sy < p.min_area:
                     continue
-                rect = MultiPoint(metres(np.argwhere(comp))).minimum_rotated_rectangle
-                if p.shrink > 0 and isinstance(rect, Polygon):
-                    small = rect.buffer(-p.shrink, join_style="mitre")
-                    rect = small if isinstance(small, Polygon) and small.area > 0 else rect
-                if not isinstance(rect, Polygon) or rect.area <= 0:
-                    continue
-                ring = np.asarray(rect.exterior.coords, np.float64)[:-1]
-                classes.append(k)
-                scores.append(float(prob[k][comp].mean()))
-                points.append(resample_polyline(ring, p.num_points, closed=True))
+                parts = _crossing_parts(comp, metres, p, sx * sy)
+                for cells in parts:
+                    xy = metres(cells)
+                    rect = (
+                        _band_rectangle(xy, 0.5 * sx)
+                        if len(parts) > 1
+                        else MultiPoint(xy).minimum_rotated_rectangle
+                    )
+                    if p.shrink > 0 and isinstance(rect, Polygon):
+                        small = rect.buffer(-p.shrink, join_style="mitre")
+                        rect = small if isinstance(small, Polygon) and small.area > 0 else rect
+                    if not isinstance(rect, Polygon) or rect.area <= 0:
+                        continue
+                    ring = np.asarray(rect.exterior.coords, np.float64)[:-1]
+                    classes.append(k)
+                    scores.append(float(prob[k][cells[:, 0], cells[:, 1]].mean()))
+                    points.append(resample_polyline(ring, p.num_points, closed=True))
             continue
         skel = skeletonize(mask)
         degree = ndimage.convolve(skel.astype(np.int64), _K8, mode="constant") - 1
