@@ -121,6 +121,20 @@ def test_rectangular_crossing_is_not_split() -> None:
     assert _crossing_iou(inst.points[inst.classes == 0], [rect])[0] > 0.7
 
 
+def test_skewed_crossing_keeps_its_shape() -> None:
+    """A crossing cut obliquely across a road (a parallelogram) comes back as its convex hull,
+    closer to it than the rectangle around it."""
+    skew = np.array([[-8, -2], [4, -2], [8, 2], [-4, 2]], np.float64)
+    pts = resample_polyline(skew, 20, closed=True)[None]
+    mask = rasterise(torch.from_numpy(pts), torch.zeros(1, dtype=torch.long), 50, 25, HX, HY)
+    prob = 0.05 + 0.9 * mask.numpy()
+    hull = vectorise(prob, HX, HY)
+    rect = vectorise(prob, HX, HY, VectoriseParams(hull_simplify=0.0))
+    iou_hull = _crossing_iou(hull.points[hull.classes == 0], [skew])[0]
+    iou_rect = _crossing_iou(rect.points[rect.classes == 0], [skew])[0]
+    assert iou_hull > 0.75 and iou_hull > iou_rect + 0.05, (iou_hull, iou_rect)
+
+
 def test_empty_and_bad_input() -> None:
     empty = vectorise(np.zeros((3, 50, 25)), HX, HY)
     assert len(empty) == 0 and empty.points.shape == (0, 20, 2)

@@ -8,9 +8,10 @@ from the masks instead (``model.instances = "segmentation"``):
 - a divider or boundary mask is thinned to its skeleton (scikit-image); the skeleton is cut at its
   junctions into branches, each branch is ordered into a polyline, simplified and resampled to P
   points; branches shorter than ``min_length`` metres are dropped;
-- each connected crossing mask becomes the minimum rotated rectangle of its cells, shrunk by the
-  target's line radius (the targets mark cells within that radius of the contour), resampled to P
-  points along its closed contour; a mask of several touching crossings (around an intersection,
+- each connected crossing mask becomes the convex hull of its cells (grown by half a cell,
+  simplified by ``hull_simplify``; or their minimum rotated rectangle), shrunk by the target's
+  line radius (the targets mark cells within that radius of the contour), resampled to P points
+  along its closed contour; a mask of several touching crossings (around an intersection,
   or meeting at a corner) is first cut into one part per crossing (``_crossing_parts``);
 - an instance's score is the mean probability of its cells (its skeleton for lines).
 
@@ -45,6 +46,8 @@ class VectoriseParams:
     shrink: float = 0.9  # crossing rectangles shrink by this (the target's line radius)
     rectangularity: float = 0.6  # a crossing mask filling less of its rectangle is split (0: never)
     corner_tolerance: float = 2.0  # Douglas-Peucker tolerance that finds a split mask's corners
+    hull_simplify: float = 0.5  # a crossing's outline: the convex hull of its cells simplified
+    # by this tolerance (0: their minimum rotated rectangle), then shrunk by ``shrink``
     max_hole: float = 2.0  # a crossing mask around a hole of larger inscribed radius is split
     simplify: float = 0.2  # Douglas-Peucker tolerance of line branches before resampling
     num_points: int = 20  # points per instance
@@ -58,7 +61,8 @@ class VectoriseParams:
             raise ValueError(
                 f"vectorise: rectangularity must be in [0, 1], got {self.rectangularity}"
             )
-        for key in ("min_length", "min_area", "shrink", "simplify", "corner_tolerance", "max_hole"):
+        for key in ("min_length", "min_area", "shrink", "simplify", "corner_tolerance", "max_hole",
+                    "hull_simplify"):  # fmt: skip
             if not getattr(self, key) >= 0:
                 raise ValueError(f"vectorise: {key} must be >= 0, got {getattr(self, key)}")
 
@@ -269,11 +273,13 @@ def vectorise(
                 parts = _crossing_parts(comp, metres, p, sx * sy)
                 for cells in parts:
                     xy = metres(cells)
-                    rect = (
-                        _band_rectangle(xy, 0.5 * sx)
-                        if len(parts) > 1
-                        else MultiPoint(xy).minimum_rotated_rectangle
-                    )
+                    if len(parts) > 1:
+                        rect = _band_rectangle(xy, 0.5 * sx)
+                    elif p.hull_simplify > 0:
+                        rect = MultiPoint(xy).convex_hull.buffer(0.5 * sx, join_style="mitre")
+                        rect = rect.simplify(p.hull_simplify)
+                    else:
+                        rect = MultiPoint(xy).minimum_rotated_rectangle
                     if p.shrink > 0 and isinstance(rect, Polygon):
                         small = rect.buffer(-p.shrink, join_style="mitre")
                         rect = small if isinstance(small, Polygon) and small.area > 0 else rect
