@@ -41,6 +41,22 @@ def test_sparse_view_transformer_equals_dense_reference() -> None:
         torch.testing.assert_close(a, r, atol=1e-4, rtol=1e-3)
 
 
+def test_view_transformer_under_autocast() -> None:
+    """Mixed precision (``amp``; bfloat16 autocast, here on the CPU) runs the sparse path and stays
+    close to float32: the attention logits are written back in the logits' own dtype."""
+    torch.manual_seed(0)
+    vt = ViewTransformer(16, 24, 20, 10, RANGE_60x30.half_x, RANGE_60x30.half_y, (-1.0, 0.5), 6)
+    k, e = default_rig(6, (64, 176))
+    intr, c2e = torch.from_numpy(k)[None], torch.from_numpy(e)[None]  # (1, Ncam, 3|4, 3|4)
+    feats = torch.randn(1, 6, 16, 8, 22)  # (B, Ncam, C, h, w)
+    with torch.no_grad():
+        ref = vt(feats, intr, c2e, (64, 176))
+        with torch.autocast("cpu", dtype=torch.bfloat16):
+            out = vt(feats, intr, c2e, (64, 176))  # (B, C, X, Y)
+    assert out.shape == ref.shape and torch.isfinite(out).all()
+    assert float((out.float() - ref).abs().mean()) < 0.05 * float(ref.abs().mean())
+
+
 def test_train_step_benchmark_runs(capsys) -> None:
     from benchmarks.train_step import main
 

@@ -133,8 +133,8 @@ class ViewTransformer(nn.Module):
         logits = torch.full((b, n, ncam * z), -1e4, dtype=value.dtype, device=value.device)
         qlog = self.query_logits(q)  # (N, Ncam*Z)
         logits = logits.index_put(
-            (ib, icell, k), qlog[icell, k] + self.feat_logits(value).squeeze(-1)
-        )  # (B, N, Ncam*Z); invalid pairs stay -1e4
+            (ib, icell, k), (qlog[icell, k] + self.feat_logits(value).squeeze(-1)).to(logits.dtype)
+        )  # (B, N, Ncam*Z); invalid pairs stay -1e4 (autocast may give the logits another dtype)
         weights = torch.softmax(logits.float(), dim=-1).to(value.dtype)  # (B, N, Ncam*Z)
         w = weights[ib, icell, k]  # (V,) invalid pairs weigh 0; cells seen by no camera get 0
         agg = torch.zeros(b * n, value.shape[1], dtype=value.dtype, device=value.device)
