@@ -79,11 +79,11 @@ def test_bad_seed() -> None:
         generate_city("3")  # type: ignore[arg-type]
 
 
-def _digest(seed: int, varied: bool = False) -> str:
+def _digest(seed: int, varied: bool = False, junctions: bool = False) -> str:
     import hashlib
 
     h = hashlib.sha256()
-    w = generate_city(seed, varied)
+    w = generate_city(seed, varied, junctions)
     for m in w.instances:
         h.update(np.asarray(m.points, np.float64).tobytes())
         h.update(f"{m.id} {int(m.cls)} {m.style}".encode())
@@ -111,3 +111,39 @@ def test_varied_cities(monkeypatch: pytest.MonkeyPatch) -> None:
     assert area(varied) > 1.05 * area(plain)
     for m in varied.instances:  # still valid geometry
         assert np.all(np.isfinite(m.points)) and len(m.points) >= 2
+
+
+def test_junction_cities() -> None:
+    """``junctions``: the varied city (its kerbs, the same drives) with the crossings of each
+    junction moved to the junction's edge (closer to the node than the plain rule puts them), some
+    skewed; the varied and plain cities stay as they were; deterministic."""
+    from icmapper.data.sim.sequences import sim_sequences
+
+    assert _digest(6037, junctions=True) == _digest(6037, junctions=True)
+    assert _digest(6037, junctions=True) != _digest(6037, varied=True)
+    varied, junc = generate_city(6037, varied=True), generate_city(6037, junctions=True)
+    assert junc.name == "sim-junction-city-6037"
+
+    def of(w, cls):  # noqa: ANN001, ANN202
+        return [np.asarray(m.points) for m in w.instances if int(m.cls) == cls]
+
+    # the same lanes, and the same number of crossings, in other places
+    assert varied.lanes.keys() == junc.lanes.keys()
+    for k, lane in varied.lanes.items():
+        np.testing.assert_array_equal(lane.centerline, junc.lanes[k].centerline)
+    cv, cj = of(varied, MapClass.PED_CROSSING), of(junc, MapClass.PED_CROSSING)
+
+    def kept(a: np.ndarray, others: list[np.ndarray]) -> bool:
+        return any(a.shape == b.shape and np.allclose(a, b) for b in others)
+
+    # junction crossings move; crossings at corners stay (mid-block ones may be added: the blocks
+    # between junction crossings grow)
+    assert 0 < sum(kept(c, cv) for c in cj) < len(cj) and len(cj) >= len(cv)
+    assert sum(not kept(c, cj) for c in cv) >= 5
+    sides = [np.linalg.norm(np.diff(np.vstack([c, c[:1]]), axis=0), axis=1) for c in cj]
+    skewed = [abs(float(np.dot(*np.diff(c[:3], axis=0)))) > 1e-6 for c in cj]  # corner 1 not 90°
+    assert any(skewed) and all(np.all(s > 0.5) for s in sides)
+    # the same drives, named for the variety
+    (dv,), (dj,) = sim_sequences("train", 1, varied=True), sim_sequences("train", 1, junctions=True)
+    assert dj.name == dv.name.replace("sim-varied-", "sim-junction-")
+    np.testing.assert_array_equal(dj.poses, dv.poses)

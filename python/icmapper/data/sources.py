@@ -8,6 +8,9 @@ and errors list the registry.
     sim-varied:<split>:N
                        N synthetic drives of the same cities with real-road variety (wide lanes,
                        shoulders, unmarked lanes: domain randomisation for training)
+    sim-junction:<split>:N
+                       N drives of the varied cities with the crossings of each junction at its
+                       edge, ringing it (some skewed), as in Argoverse 2 (for training)
     sim-city:<split>:INDEX:N
                        N drives through one synthetic city (city INDEX of the split)
     av2:PATH[:split]   the drive of an Argoverse 2 log, or of every log in a folder of logs (a
@@ -192,16 +195,22 @@ def _open_sim(spec: str, rest: str, o: SourceOptions) -> list[Sequence]:
     return list(sim.sim_sequences(parts[0], n, seed=o.seed, image_size=o.image_size))
 
 
-def _open_sim_varied(spec: str, rest: str, o: SourceOptions) -> list[Sequence]:
-    from icmapper.data import sim
+def _open_sim_variety(kind: str, **variety: bool) -> Callable[..., list[Sequence]]:
+    """The opener of ``kind:<split>[:N]``: synthetic drives of cities with a variety
+    (``generate_city``'s ``varied`` / ``junctions``)."""
 
-    parts = rest.split(":")
-    if parts[0] not in SIM_SPLITS or len(parts) > 2:
-        raise ValueError(
-            f"bad source spec {spec!r}: expected sim-varied:<{'|'.join(SIM_SPLITS)}>[:N]"
-        )
-    n = _count(parts[1], spec) if len(parts) == 2 else DEFAULT_SIM_COUNT
-    return list(sim.sim_sequences(parts[0], n, seed=o.seed, image_size=o.image_size, varied=True))
+    def open_(spec: str, rest: str, o: SourceOptions) -> list[Sequence]:
+        from icmapper.data import sim
+
+        parts = rest.split(":")
+        if parts[0] not in SIM_SPLITS or len(parts) > 2:
+            raise ValueError(
+                f"bad source spec {spec!r}: expected {kind}:<{'|'.join(SIM_SPLITS)}>[:N]"
+            )
+        n = _count(parts[1], spec) if len(parts) == 2 else DEFAULT_SIM_COUNT
+        return list(sim.sim_sequences(parts[0], n, seed=o.seed, image_size=o.image_size, **variety))
+
+    return open_
 
 
 def _split_arg(spec: str, rest: str, o: SourceOptions) -> tuple[Path, str | None, Path | None]:
@@ -299,7 +308,16 @@ register_source(
         "sim-varied:<split>[:N]",
         "N synthetic drives of cities with real-road variety (wide lanes, shoulders, unmarked "
         "lanes; for training)",
-        _open_sim_varied,
+        _open_sim_variety("sim-varied", varied=True),
+    )
+)
+register_source(
+    SourceKind(
+        "sim-junction",
+        "sim-junction:<split>[:N]",
+        "N synthetic drives of the varied cities with crossings ringing the junctions (at the "
+        "junction's edge, some skewed, as in Argoverse 2; for training)",
+        _open_sim_variety("sim-junction", junctions=True),
     )
 )
 register_source(

@@ -15,7 +15,9 @@ widths up to 5.5 m, a paved shoulder (0.5-3 m of asphalt between the outer lane 
 as on roads with parking or bike lanes), and streets whose lanes of one direction are not marked
 (no lane dividers, only the centre line). Real logs (Argoverse 2) have all three; the plain
 generator has none, and a detector trained on it draws a divider every 3-4 m and pulls the kerbs
-in towards them.
+in towards them. With ``junctions=True`` (the varied city, from one more stream) the crossings of
+a junction sit at its edge instead of beyond its kerb corners, 3-6 m deep, half of them skewed up
+to 0.4 x the street width: they touch at the junction's corners and ring it, as Argoverse 2's do.
 
 This module only builds geometry; it holds no I/O and no rendering.
 """
@@ -183,9 +185,10 @@ def _dashed(style: str) -> bool:
     return style.startswith("dashed")
 
 
-def generate_city(seed: int, varied: bool = False) -> WorldMap:
+def generate_city(seed: int, varied: bool = False, junctions: bool = False) -> WorldMap:
     """Builds the synthetic city of `seed` (same seed, same city; ``varied``: with the real-road
-    variety of the module docstring, named "sim-varied-city-<seed>").
+    variety of the module docstring, named "sim-varied-city-<seed>"; ``junctions``: the varied city
+    with its junction crossings at the junction's edge, named "sim-junction-city-<seed>").
 
     Returns a WorldMap named "sim-city-<seed>" with map instances (ids 1..N, unique and stable for
     the seed; dividers, crossings, then boundaries), drivable pieces (simple polygons (n, 2) whose
@@ -196,9 +199,12 @@ def generate_city(seed: int, varied: bool = False) -> WorldMap:
     rng = np.random.default_rng([seed, 0x5C17])
     nodes, edges = _grid_graph(rng)
     streets = [_make_street(rng, a, b, nodes) for a, b in edges]
+    varied = varied or junctions
     if varied:
         vary = np.random.default_rng([seed, 0xD1CE])  # own stream: plain cities stay unchanged
         streets = [_vary_street(st, vary) for st in streets]
+    # own stream too: a junction city is its varied city with crossings moved
+    ring = np.random.default_rng([seed, 0x2196]) if junctions else None
     corner_r = float(rng.uniform(4.0, 9.0))  # kerb radius at junction corners
 
     # Junction radius per node: far enough along each arm that the arms no longer touch.
@@ -231,15 +237,22 @@ def generate_city(seed: int, varied: bool = False) -> WorldMap:
         s_a, s_b = ra + 0.5, length - rb - 0.5
         gaps: list[tuple[float, float]] = []  # arc-length spans with no divider paint
         for end, r_end in ((0, ra), (1, rb)):
-            if len(arms[st.a if end == 0 else st.b]) >= 3 or rng.random() < 0.3:
+            node = st.a if end == 0 else st.b
+            if len(arms[node]) >= 3 or rng.random() < 0.3:
                 if rng.random() < 0.75:
                     depth = float(rng.uniform(3.0, 5.0))
-                    c0 = r_end + 0.5 if end == 0 else length - r_end - 0.5 - depth
-                    crossings.append(_crossing_ring(st, c0, c0 + depth))
+                    at, skew = r_end + 0.5, 0.0  # distance from the node, skew (m)
+                    if ring is not None and len(arms[node]) >= 3:  # at the junction's edge
+                        depth = float(ring.uniform(3.0, 6.0))
+                        at = r_end - corner_r - 1.5 + float(ring.uniform(0.0, 1.0))
+                        if ring.random() < 0.5:
+                            skew = float(ring.uniform(-0.4, 0.4)) * (st.hw_left + st.hw_right)
+                    c0 = at if end == 0 else length - at - depth
+                    crossings.append(_crossing_ring(st, c0, c0 + depth, skew))
                     if end == 0:
-                        s_a = c0 + depth + 1.0
+                        s_a = c0 + depth + abs(skew) + 1.0
                     else:
-                        s_b = c0 - 1.0
+                        s_b = c0 - abs(skew) - 1.0
         if st.median == 0.0 and s_b - s_a > 50.0 and rng.random() < 0.35:
             depth = float(rng.uniform(3.0, 5.0))
             c0 = float(rng.uniform(s_a + 15.0, s_b - 15.0 - depth))
@@ -313,7 +326,7 @@ def generate_city(seed: int, varied: bool = False) -> WorldMap:
             add(MapClass.BOUNDARY, pts, "curb")
 
     drivable = [np.asarray(p.exterior.coords, np.float64)[:-1] for p in pieces if p.area > 0.5]
-    name = f"sim-varied-city-{seed}" if varied else f"sim-city-{seed}"
+    name = f"sim-{variety_prefix(varied, junctions)}city-{seed}"
     return WorldMap(name, instances, drivable, lanes)
 
 
@@ -329,14 +342,20 @@ def _spans(s0: float, s1: float, gaps: list[tuple[float, float]]) -> list[tuple[
     return out
 
 
-def _crossing_ring(st: _Street, s0: float, s1: float) -> NDArray[np.float64]:
-    """Closed ring (4, 2) of a crossing over the full street width between arc lengths s0 < s1."""
+def variety_prefix(varied: bool, junctions: bool) -> str:
+    """The name part of a city's variety: "", "varied-" or "junction-"."""
+    return "junction-" if junctions else "varied-" if varied else ""
+
+
+def _crossing_ring(st: _Street, s0: float, s1: float, skew: float = 0.0) -> NDArray[np.float64]:
+    """Closed ring (4, 2) of a crossing over the full street width between arc lengths s0 < s1;
+    ``skew`` metres moves its left side forward and its right side back (a parallelogram)."""
     return np.array(
         [
-            st.at(s0, -st.hw_right),
-            st.at(s1, -st.hw_right),
-            st.at(s1, st.hw_left),
-            st.at(s0, st.hw_left),
+            st.at(s0 - skew / 2, -st.hw_right),
+            st.at(s1 - skew / 2, -st.hw_right),
+            st.at(s1 + skew / 2, st.hw_left),
+            st.at(s0 + skew / 2, st.hw_left),
         ]
     )
 

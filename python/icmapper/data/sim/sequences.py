@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from icmapper.data.sim.city import CITY_SEEDS, generate_city
+from icmapper.data.sim.city import CITY_SEEDS, generate_city, variety_prefix
 from icmapper.data.sim.driver import drive
 from icmapper.data.sim.renderer import Renderer
 from icmapper.data.sim.rig import nuscenes_rig
@@ -22,14 +22,16 @@ def sim_sequence(
     image_size: tuple[int, int] = (128, 352),
     world: WorldMap | None = None,
     varied: bool = False,
+    junctions: bool = False,
 ) -> Sequence:
     """The drive `drive_seed` through city `city_seed` as a Sequence named "sim-<city>-<drive>"
-    ("sim-varied-<city>-<drive>" in the ``varied`` city) (source "sim"). `render(i)` gives frame
+    ("sim-varied-<city>-<drive>" in the ``varied`` city, "sim-junction-..." in the ``junctions``
+    one: ``generate_city``) (source "sim"). `render(i)` gives frame
     i's images (C, 3, H, W) uint8; one Renderer is made per sequence and paints its world raster on
     the first frame. `world` lets callers pass the already generated city of `city_seed` (it must
     be that city)."""
     if world is None:
-        world = generate_city(city_seed, varied)
+        world = generate_city(city_seed, varied, junctions)
     timestamps, poses = drive(world, drive_seed)
     rig = nuscenes_rig(image_size)
     renderer = Renderer(
@@ -43,7 +45,7 @@ def sim_sequence(
             poses[i], frame_seed=_frame_seed(city_seed, drive_seed, i), t=float(timestamps[i])
         )
 
-    name = f"sim-varied-{city_seed}-{drive_seed}" if varied else f"sim-{city_seed}-{drive_seed}"
+    name = f"sim-{variety_prefix(varied, junctions)}{city_seed}-{drive_seed}"
     return Sequence(name, "sim", world, timestamps, poses, rig, render)
 
 
@@ -53,11 +55,13 @@ def sim_sequences(
     seed: int = 0,
     image_size: tuple[int, int] = (128, 352),
     varied: bool = False,
+    junctions: bool = False,
 ) -> list[Sequence]:
     """`num` deterministic sequences of `split` ("train" | "val" | "test"): city seeds drawn from
     the split's range with `seed` (without repeats while the split has enough cities), one drive
     each (drive seed = position in the list). Each city is generated once (``varied``: the cities
-    with real-road variety, ``generate_city``)."""
+    with real-road variety; ``junctions``: those with crossings ringing the junctions;
+    ``generate_city``)."""
     if split not in CITY_SEEDS:
         raise ValueError(f"unknown split {split!r}; expected one of {sorted(CITY_SEEDS)}")
     if num < 0:
@@ -70,8 +74,12 @@ def sim_sequences(
     for k, p in enumerate(picks):
         city = cities[int(p)]
         if city not in worlds:
-            worlds[city] = generate_city(city, varied)
-        out.append(sim_sequence(city, k, image_size, world=worlds[city], varied=varied))
+            worlds[city] = generate_city(city, varied, junctions)
+        out.append(
+            sim_sequence(
+                city, k, image_size, world=worlds[city], varied=varied, junctions=junctions
+            )
+        )
     return out
 
 
