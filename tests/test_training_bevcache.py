@@ -150,6 +150,23 @@ def test_frozen_encoder_training(encoder_run: Path, tmp_path: Path) -> None:
     assert not [p for p in files[0].parent.iterdir() if p.name.endswith(".tmp")]
 
 
+def test_stage1_fine_tune_starts_from_init(encoder_run: Path, tmp_path: Path) -> None:
+    """Stage 1 with ``init`` (and no freezing) starts from init's weights with a fresh schedule:
+    one step at a vanishing learning rate leaves them as they were (batch-norm statistics aside);
+    without ``init`` the run starts from its own initialisation."""
+    cfg = _cfg(steps=1, lr=1e-12)
+    train(cfg, 1, tmp_path / "ft", init=encoder_run, progress=False)
+    before = load_checkpoint(encoder_run)["model"]
+    blob = load_checkpoint(tmp_path / "ft" / "stage1.pt")
+    assert int(blob["step"]) == 1
+    weights = [k for k in before if "running_" not in k and "num_batches" not in k]
+    for k in weights:
+        torch.testing.assert_close(blob["model"][k], before[k], atol=1e-6, rtol=0)
+    train(cfg, 1, tmp_path / "fresh", progress=False)
+    fresh = load_checkpoint(tmp_path / "fresh" / "stage1.pt")["model"]
+    assert any(not torch.allclose(fresh[k], before[k], atol=1e-6) for k in weights)
+
+
 def test_frozen_encoder_needs_a_fitting_checkpoint(encoder_run: Path, tmp_path: Path) -> None:
     raw = {**TINY, "model": {**TINY["model"], "channels": 32}}
     cfg = config_from_dict({**raw, "stage1": {**TINY["stage1"], "freeze_encoder": True}})

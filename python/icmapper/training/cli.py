@@ -31,7 +31,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--resume", action="store_true", help="continue OUT/stage{n}.pt")
     p.add_argument("--out", type=Path, default=Path("runs/train"), help="output folder")
     p.add_argument("--max-steps", type=int, default=None, help="stop after N steps in all")
-    p.add_argument("--init", type=Path, default=None, help="stage 2: stage-1 checkpoint")
+    p.add_argument(
+        "--init",
+        type=Path,
+        default=None,
+        help="stage 2: stage-1 checkpoint; stage 1: weights to fine-tune (or, with "
+        "stage1.freeze_encoder, the encoder)",
+    )
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument(
         "--fill-cache",

@@ -269,7 +269,9 @@ def train(
 
     Returns {'step', 'losses' (last logged means), 'checkpoint', 'param_digest' (this rank's)}.
 
-    stage 2 starts from ``init`` (default OUT/stage1.pt) unless it resumes its own checkpoint.
+    stage 2 starts from ``init`` (default OUT/stage1.pt) unless it resumes its own checkpoint;
+    stage 1 starts from ``init``'s weights when given (a fine-tune with a fresh optimizer and
+    schedule; with ``freeze_encoder``, from its encoder).
     ``dataset`` (dataset, collate) overrides ``cfg.data.source``.
     """
     if stage not in (1, 2):
@@ -295,6 +297,8 @@ def train(
         if init is None:
             raise ValueError("stage1.freeze_encoder needs --init: the checkpoint of the encoder")
         load_encoder(net, Path(init))
+    elif init is not None:  # a fine-tune: init's weights, a fresh optimizer and schedule
+        net.load_state_dict(load_checkpoint(Path(init))["model"])
     if stage == 1 and cfg.stage1.freeze_encoder:
         for part in ENCODER_PARTS:
             module = getattr(net.detector, part)
