@@ -86,3 +86,20 @@ def test_train_fill_cache_cli(tmp_path: Path, capsys: pytest.CaptureFixture[str]
     assert "--fill-cache must be I/N" in capsys.readouterr().err
     assert main([*base, "--set", 'data.cache_dir=""', "--fill-cache", "0/1"]) != 0
     assert "needs data.cache_dir" in capsys.readouterr().err
+
+
+def test_fusion_gain_of_the_shipped_checkpoint() -> None:
+    """fusion-gain compares each fused detection with the truth before and after fusion; without
+    fusion (the no-fusion mapper, every tracked detection counted) both numbers are the same."""
+    from icmapper.checkpoints import DEFAULT_CHECKPOINT
+
+    full = diagnostics.fusion_gain(Path(DEFAULT_CHECKPOINT), "sim:val:1")
+    assert set(full) == {"ped_crossing", "divider", "boundary"}
+    assert sum(v["n"] for v in full.values()) > 20
+    for v in full.values():
+        if v["n"]:
+            assert 0.0 <= v["raw"] <= 1.5 and v["fused"] >= 0.0
+    assert any(v["n"] and v["fused"] != v["raw"] for v in full.values())
+    plain = diagnostics.fusion_gain(Path(DEFAULT_CHECKPOINT), "sim:val:1", variant="no-fusion")
+    assert sum(v["n"] for v in plain.values()) > 20
+    assert all(v["fused"] == v["raw"] for v in plain.values() if v["n"])

@@ -1,4 +1,5 @@
-"""Why is the detector weak? Two upper bounds, measured with the project's own detection eval.
+"""Why is the detector weak? Two upper bounds, measured with the project's own detection eval, and
+what the fusion does to the detections.
 
 ``perfect-bev``: the decoder (same ``MapDecoder``, matcher and loss as the detector) fed a perfect
 BEV: the rasterised ground truth (``models.segmentation.rasterise``) lifted to the BEV channels by
@@ -8,8 +9,15 @@ two convolutions. What it reaches bounds what any view transformer could give th
 (``model.seg_head``) on the validation drives: how much of the map the BEV features hold, read by
 a dense head instead of the set decoder.
 
+``fusion-gain``: does the spatial fusion move a detection towards the truth? Over the mapper's run
+on the drives, each detection the fusion changed (it had a history in the map) is compared with
+the nearest same-class ground-truth instance of its frame (symmetric Chamfer of densely resampled
+points) before and after fusion; detections farther than ``gate`` from every truth (false
+detections) are left out.
+
 ``python -m icmapper.training.diagnostics perfect-bev --config configs/small.toml --steps 3000``
 ``python -m icmapper.training.diagnostics seg-iou CHECKPOINT --source sim:val:4``
+``python -m icmapper.training.diagnostics fusion-gain CHECKPOINT --source sim:val:4``
 """
 
 from __future__ import annotations
@@ -166,6 +174,58 @@ def seg_iou(checkpoint: Path, spec: str) -> dict[str, float]:
     return {n: 100 * float(inter[k] / max(union[k], 1)) for k, n in enumerate(CLASS_NAMES)}
 
 
+def _nearest_chamfer(points: np.ndarray, truths: np.ndarray, closed: bool) -> float:
+    """Symmetric Chamfer (m) of an instance (P, 2) to the nearest of truths (G, P', 2), both
+    resampled to 100 points along the line (the ring for closed instances)."""
+    from icmapper.models.vectorise import resample_polyline
+
+    a = resample_polyline(np.asarray(points, np.float64), 100, closed)  # (100, 2)
+    best = np.inf
+    for t in truths:
+        b = resample_polyline(np.asarray(t, np.float64), 100, closed)
+        d = np.linalg.norm(a[:, None] - b[None], axis=-1)  # (100, 100)
+        best = min(best, 0.5 * float(d.min(0).mean() + d.min(1).mean()))
+    return best
+
+
+def fusion_gain(
+    checkpoint: Path, spec: str, gate: float = 1.5, variant: str = "full"
+) -> dict[str, dict[str, float]]:
+    """Per class: ``n`` detections the fusion changed that lie within ``gate`` m of a truth, and
+    their mean Chamfer to it before (``raw``) and after (``fused``) fusion, over the mapper
+    (``Mapper.from_checkpoint(checkpoint, variant=variant)``) run on ``spec``."""
+    from icmapper.data.gt import sequence_gt
+    from icmapper.data.sources import open_source
+    from icmapper.mapping.mapper import Mapper
+    from icmapper.models.network import load_network
+
+    mapper = Mapper.from_checkpoint(checkpoint, variant=variant)
+    size = load_network(checkpoint).image_size
+    errors: dict[int, list[tuple[float, float]]] = {k: [] for k in range(len(CLASS_NAMES))}
+    for seq in open_source(spec, image_size=size):
+        mapper.reset()
+        truth = sequence_gt(seq, mapper.rng)
+        for i in range(len(seq)):
+            step = mapper.step(seq.frame(i))
+            det, g = step.detections, truth[i]
+            for j in range(len(det)):
+                k = int(det.classes[j])
+                same = g.points[g.classes == k]  # (G, P, 2)
+                changed = not np.array_equal(step.points[j], det.points[j])
+                if not len(same) or not (changed or variant != "full"):
+                    continue
+                closed = k == 0
+                raw = _nearest_chamfer(det.points[j], same, closed)
+                if raw <= gate:
+                    errors[k].append((raw, _nearest_chamfer(step.points[j], same, closed)))
+    out = {}
+    for k, name in enumerate(CLASS_NAMES):
+        e = np.asarray(errors[k], np.float64).reshape(-1, 2)
+        mean = e.mean(0) if len(e) else np.full(2, np.nan)
+        out[name] = {"n": float(len(e)), "raw": float(mean[0]), "fused": float(mean[1])}
+    return out
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m icmapper.training.diagnostics",
                                  description=__doc__)  # fmt: skip
@@ -180,6 +240,10 @@ def main(argv: list[str] | None = None) -> int:
     s = sub.add_parser("seg-iou", help="IoU of a checkpoint's segmentation head")
     s.add_argument("checkpoint", type=Path)
     s.add_argument("--source", default="sim:val:4")
+    f = sub.add_parser("fusion-gain", help="detections before and after fusion, against the truth")
+    f.add_argument("checkpoint", type=Path)
+    f.add_argument("--source", default="sim:val:4")
+    f.add_argument("--gate", type=float, default=1.5)
     args = ap.parse_args(argv)
     if args.what == "perfect-bev":
         from icmapper.settings import parse_assignments
@@ -187,6 +251,8 @@ def main(argv: list[str] | None = None) -> int:
         over = parse_assignments(args.set or [])
         det = perfect_bev(args.config, args.steps, args.train, args.val, args.batch, True, over)
         print(json.dumps({k: det[k] for k in ("AP", "AP_class", "mAP")}, indent=1))
+    elif args.what == "fusion-gain":
+        print(json.dumps(fusion_gain(args.checkpoint, args.source, args.gate), indent=1))
     else:
         print(json.dumps(seg_iou(args.checkpoint, args.source), indent=1))
     return 0
