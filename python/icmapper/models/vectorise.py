@@ -20,7 +20,7 @@ Everything here is numpy / scipy / scikit-image / shapely on one frame; no gradi
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -28,7 +28,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 if TYPE_CHECKING:
-    from shapely.geometry import Polygon
+    from shapely.geometry import LineString, Polygon
 
 #: Class index of crossings (closed contours); the other classes are open polylines.
 CROSSING = 0
@@ -129,6 +129,30 @@ def _fill(xy: NDArray[np.float64], half_cell: float) -> float:
     return float(len(xy) * (2 * half_cell) ** 2 / rect.area) if rect.area > 0 else 1.0
 
 
+def _skeleton_branches(
+    mask: NDArray[np.bool_],
+    metres: Callable[[NDArray[np.int64]], NDArray[np.float64]],
+    min_length: float,
+) -> Iterator[tuple[NDArray[np.int64], LineString]]:
+    """The skeleton of ``mask`` (X, Y) (scikit-image) cut at its junctions: each branch's cells
+    (L, 2) in path order and its polyline in metres, for branches at least ``min_length`` long."""
+    from scipy import ndimage
+    from shapely.geometry import LineString
+    from skimage.morphology import skeletonize
+
+    skel = skeletonize(mask)
+    degree = ndimage.convolve(skel.astype(np.int64), _K8, mode="constant") - 1
+    junctions = ndimage.binary_dilation(skel & (degree >= 3), _K8) & skel
+    labels, n = ndimage.label(skel & ~junctions, _K8)
+    for c in range(1, n + 1):
+        path = _order_branch(np.argwhere(labels == c))
+        if len(path) < 2:
+            continue
+        line = LineString(metres(path))
+        if line.length >= min_length:
+            yield path, line
+
+
 def _band_rectangle(xy: NDArray[np.float64], half_cell: float) -> Polygon:
     """A rectangle fitted robustly to the cells ``xy`` (M, 2) of one part of a split crossing
     mask: along its principal axis from the 1st to the 99th percentile, across it the width the
@@ -163,8 +187,7 @@ def _crossing_parts(
     nearest side or run, then the two parts whose union is most rectangular are joined while it
     stays above ``rectangularity``."""
     from scipy import ndimage
-    from shapely.geometry import LineString, MultiPoint, Polygon
-    from skimage.morphology import skeletonize
+    from shapely.geometry import MultiPoint, Polygon
 
     half = 0.5 * float(np.sqrt(cell_area))
     # holes narrower than ``max_hole`` are the unpainted inside of one crossing's outline mask;
@@ -191,17 +214,8 @@ def _crossing_parts(
             if isinstance(hull, Polygon):
                 add(np.asarray(hull.exterior.simplify(p.corner_tolerance).coords, np.float64))
     else:  # along the straight runs of its skeleton
-        skel = skeletonize(comp)
-        degree = ndimage.convolve(skel.astype(np.int64), _K8, mode="constant") - 1
-        junctions = ndimage.binary_dilation(skel & (degree >= 3), _K8) & skel
-        branches, nb = ndimage.label(skel & ~junctions, _K8)
-        for b in range(1, nb + 1):
-            path = _order_branch(np.argwhere(branches == b))
-            if len(path) < 2:
-                continue
-            line = LineString(metres(path))
-            if line.length >= p.min_length:
-                add(np.asarray(line.simplify(p.corner_tolerance).coords, np.float64))
+        for _, line in _skeleton_branches(comp, metres, p.min_length):
+            add(np.asarray(line.simplify(p.corner_tolerance).coords, np.float64))
     if len(starts) < 2:
         return [cells]
     a, b_ = np.asarray(starts), np.asarray(ends)  # (S, 2) segment ends
@@ -238,8 +252,7 @@ def vectorise(
     import torch
     import torch.nn.functional as F
     from scipy import ndimage
-    from shapely.geometry import LineString, MultiPoint, Polygon
-    from skimage.morphology import skeletonize
+    from shapely.geometry import MultiPoint, Polygon
 
     p = params or VectoriseParams()
     prob = np.asarray(prob)
@@ -290,17 +303,7 @@ def vectorise(
                     scores.append(float(prob[k][cells[:, 0], cells[:, 1]].mean()))
                     points.append(resample_polyline(ring, p.num_points, closed=True))
             continue
-        skel = skeletonize(mask)
-        degree = ndimage.convolve(skel.astype(np.int64), _K8, mode="constant") - 1
-        junctions = ndimage.binary_dilation(skel & (degree >= 3), _K8) & skel
-        labels, n = ndimage.label(skel & ~junctions, _K8)
-        for c in range(1, n + 1):
-            path = _order_branch(np.argwhere(labels == c))
-            if len(path) < 2:
-                continue
-            line = LineString(metres(path))
-            if line.length < p.min_length:
-                continue
+        for path, line in _skeleton_branches(mask, metres, p.min_length):
             simple = np.asarray(line.simplify(p.simplify).coords, np.float64)
             classes.append(k)
             scores.append(float(prob[k][path[:, 0], path[:, 1]].mean()))
