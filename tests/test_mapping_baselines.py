@@ -9,10 +9,10 @@ import pytest
 from icmapper.data.types import FrameGT, RANGE_60x30, Sequence, WorldMap, xy_yaw_to_pose
 from icmapper.mapping.baselines import ClusterFit, PostTrack
 from icmapper.mapping.baselines.cluster_fit import dbscan
-from icmapper.mapping.baselines.splice import overlap_fraction, splice_polyline
 from icmapper.mapping.config import MapperConfig
 from icmapper.mapping.methods import methods
 from icmapper.mapping.oracle import OracleDetector
+from icmapper.mapping.splice import overlap_fraction, splice_polyline
 from icmapper.mapping.types import Detections
 
 #: The registered methods that run on any detection source (the baselines).

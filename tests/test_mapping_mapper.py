@@ -503,3 +503,61 @@ def test_av2_boundaries_seen_in_one_frame(shared_data: Path) -> None:
     run(m, seq)
     cd = map_cd(map_items(m), gt_items(seq))
     assert cd["boundary"] <= BOUNDS["low"]["boundary"], cd
+
+
+# ------------------------------------------------------------------- 7. fused polylines spliced
+def test_splice_into_the_map() -> None:
+    """``splice_into`` replaces the stored polyline by ``splice_polyline(stored, new)`` (which the
+    map stores resampled at its spacing)."""
+    from icmapper import GlobalMap
+    from icmapper.mapping.splice import splice_into, splice_polyline
+
+    m = GlobalMap(smoothing=0.5, spacing=1.0)
+    m.insert_with_id(7, 1, np.stack([np.arange(0.0, 21.0), np.zeros(21)], 1), frame=0)
+    _, stored = m.get(7)
+    new = np.stack([np.linspace(10.0, 30.0, 11), np.full(11, 0.3)], 1)
+    splice_into(m, 7, new, 0.5, frame=3)
+    got, want = np.asarray(m.get(7)[1]), splice_polyline(np.asarray(stored), new, 0.5)
+    np.testing.assert_allclose(got[[0, -1]], want[[0, -1]], atol=1e-9)  # x 0 .. 30
+    assert np.all(got[got[:, 0] < 9.5, 1] == 0.0) and np.allclose(got[got[:, 0] > 10.5, 1], 0.3)
+    assert m.info(7)["last_frame"] == 3
+    with pytest.raises(ValueError):
+        splice_into(m, 7, np.full((4, 2), np.nan), 0.5, frame=4)
+
+
+@pytest.mark.parametrize("rule", ["splice", "fit"])
+def test_fused_polylines_merge_by_rule(
+    rule: str, sim_val2: list[Sequence], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A fused polyline (one that had a history) is spliced into its instance under
+    ``fused_merge = "splice"`` and curve-fitted under "fit"; unfused ones are always fitted. Here
+    every detection is marked fused, so the two rules build different maps."""
+    import icmapper.mapping.mapper as mapper_mod
+
+    seq = sim_val2[0]
+    calls: list[int] = []
+    real = mapper_mod.splice_into
+
+    def counted(*args: object, **kw: object) -> None:
+        calls.append(1)
+        real(*args, **kw)
+
+    monkeypatch.setattr(mapper_mod, "splice_into", counted)
+    maps = {}
+    for fused in (True, False):
+        m = Mapper.with_oracle(seq, noise="low", seed=0, config=MapperConfig(fused_merge=rule))
+        if fused:
+            monkeypatch.setattr(
+                m, "_fuse", lambda det, *a: (det.points.copy(), np.ones(len(det), bool))
+            )
+        for i in range(12):
+            m.step(seq.frame(i, with_images=False))
+        assert m.stats.merged > 0 and m.stats.merge_failures == 0
+        maps[fused] = snapshot(m)
+    spliced = len(calls)
+    assert (spliced > 0) == (rule == "splice")
+    assert (maps[True] != maps[False]) == (rule == "splice")
+    with pytest.raises(ValueError, match="fused_merge"):
+        MapperConfig(fused_merge="glue")
+    with pytest.raises(ValueError, match="splice_overlap"):
+        MapperConfig(splice_overlap=0.0)

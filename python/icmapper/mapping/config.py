@@ -14,6 +14,7 @@ from dataclasses import dataclass, field, fields
 from typing import Any
 
 from icmapper.mapping.crossings import CROSSING_MERGES
+from icmapper.mapping.splice import FUSED_MERGES
 from icmapper.settings import from_table, to_plain
 
 
@@ -55,6 +56,13 @@ class MapperConfig:
     history_points: int = _f(20, "points per sampled history instance (the network's own value)")
     use_association: bool = _f(True, "learned association (false: positional affinity)")
     use_fusion: bool = _f(True, "spatial fusion with the map's history (false: merge as detected)")
+    fused_merge: str = _f(
+        "splice",
+        "how a fused polyline (one that had a history) merges into its instance: 'splice' (it "
+        "replaces the stretch it covers within splice_overlap; mapping.splice) or 'fit' (the "
+        "engine's curve fit, as an unfused one)",
+    )
+    splice_overlap: float = _f(0.5, "metres within which a spliced fused polyline replaces points")
     # ---- baselines
     baseline_threshold: float = _f(0.3, "score of detections the baselines use and report")
     gate: float = _f(1.5, "Post-Track / VMA: largest Chamfer distance (m) of a link")
@@ -82,7 +90,7 @@ class MapperConfig:
                 raise ValueError(f"MapperConfig.{name} must be in [0, 1], got {v}")
         if self.track_threshold < self.detect_threshold:
             raise ValueError("MapperConfig.track_threshold must be >= detect_threshold")
-        for name in ("positional_scale", "spacing", "history_points", "gate",
+        for name in ("positional_scale", "spacing", "history_points", "gate", "splice_overlap",
                      "vma_overlap", "cluster_eps", "polymerge_buffer", "city_gate",
                      "city_tolerance"):  # fmt: skip
             if not getattr(self, name) > 0:
@@ -93,6 +101,10 @@ class MapperConfig:
         for name in ("max_age", "reid_distance", "fusion_margin", "smoothing"):
             if not getattr(self, name) >= 0:
                 raise ValueError(f"MapperConfig.{name} must be >= 0, got {getattr(self, name)}")
+        if self.fused_merge not in FUSED_MERGES:
+            raise ValueError(
+                f"MapperConfig.fused_merge must be one of {FUSED_MERGES}, got {self.fused_merge!r}"
+            )
         if self.crossing_merge not in CROSSING_MERGES:
             raise ValueError(
                 f"MapperConfig.crossing_merge must be one of {CROSSING_MERGES}, "

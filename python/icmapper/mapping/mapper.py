@@ -16,8 +16,10 @@ Per frame (paper Fig. 2):
    new piece of an instance matched this frame maps into it);
 4. the global map is sampled in the patch expanded by ``fusion_margin`` (Rust ``sample_patch``);
 5. fusion of every tracked detection with the history of its id;
-6. merge into the global map (curve fit for polylines; crossings by ``crossing_merge``: the
-   running mean of complete views, union of views cut by the range edge), or insert once the
+6. merge into the global map (polylines: a fused one is spliced in, replacing the stretch it
+   covers, by ``fused_merge``, since fusion already combined it with the history; an unfused one
+   by curve fit; crossings by ``crossing_merge``: the running mean of complete views, union of
+   views cut by the range edge), or insert once the
    track has been seen in ``min_hits`` frames (tentative tracks keep one-off false positives out
    of the map; an extension like step 3).
 """
@@ -45,6 +47,7 @@ from icmapper.mapping.config import MapperConfig
 from icmapper.mapping.crossings import merge_crossing
 from icmapper.mapping.network_source import NetworkDetector
 from icmapper.mapping.reid import reidentify
+from icmapper.mapping.splice import splice_into
 from icmapper.mapping.tracker import Tracker, positional_affinity
 from icmapper.mapping.types import Detections, DetectionSource, StepResult
 
@@ -300,11 +303,11 @@ class Mapper:
         track_ids = self._reidentify(det, track_ids, hist_row, hist_cls, hist_pts)
         t3 = time.perf_counter()
         sec["tracking"] += t3 - t2b
-        fused = self._fuse(det, track_ids, hist_row, hist_pts)  # (m, P, 2) ego
+        fused, was_fused = self._fuse(det, track_ids, hist_row, hist_pts)  # (m, P, 2) ego, (m,)
         t4 = time.perf_counter()
         sec["fusion"] += t4 - t3
 
-        inserted, merged = self._merge(det, track_ids, fused, pose, frame.index)
+        inserted, merged = self._merge(det, track_ids, fused, was_fused, pose, frame.index)
         sec["merge"] += time.perf_counter() - t4
 
         all_ids = np.empty(len(dets), np.int64)
@@ -395,13 +398,16 @@ class Mapper:
         track_ids: NDArray[np.int64],
         hist_row: dict[int, int],
         hist_pts: NDArray[np.float32],
-    ) -> NDArray[np.float32]:
+    ) -> tuple[NDArray[np.float32], NDArray[np.bool_]]:
+        """The fused points (m, P, 2) ego and which detections were fused (m,): those whose
+        instance has a history in the map (the others pass through)."""
+        none = np.zeros(len(det), bool)
         if not (self.config.use_fusion and self.fusion is not None) or len(det) == 0:
-            return det.points.copy()
+            return det.points.copy(), none
         targets = [self._alias.get(int(i), int(i)) for i in track_ids]
         has = np.array([t in hist_row for t in targets], bool)  # (m,)
         if not has.any():
-            return det.points.copy()
+            return det.points.copy(), none
         import torch
 
         s = self.config.history_points
@@ -415,7 +421,7 @@ class Mapper:
                 torch.as_tensor(hist, device=dev),
                 torch.as_tensor(has, device=dev),
             )[-1]  # (m, P, 2) metres
-        return out.cpu().numpy().astype(np.float32)
+        return out.cpu().numpy().astype(np.float32), has
 
     def _note_failure(self, frame_index: int, target: int, exc: BaseException) -> None:
         """Counts a rejected insert or merge (degenerate geometry) and keeps the first 20."""
@@ -428,6 +434,7 @@ class Mapper:
         det: Detections,
         track_ids: NDArray[np.int64],
         fused: NDArray[np.float32],
+        was_fused: NDArray[np.bool_],
         pose: NDArray[np.float64],
         frame_index: int,
     ) -> tuple[list[int], list[int]]:
@@ -446,6 +453,15 @@ class Mapper:
                         self._map, target, world, fused[j], self.rng, frame_index,
                         self.config.crossing_merge,
                     )  # fmt: skip
+                except ValueError as exc:
+                    self._note_failure(frame_index, target, exc)
+                    continue
+                merged.append(target)
+                self.tracker.set_points(tid, world)
+                continue
+            if target in self._map and was_fused[j] and self.config.fused_merge == "splice":
+                try:  # the fusion already combined it with the history (mapping.splice)
+                    splice_into(self._map, target, world, self.config.splice_overlap, frame_index)
                 except ValueError as exc:
                     self._note_failure(frame_index, target, exc)
                     continue

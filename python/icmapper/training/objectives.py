@@ -19,6 +19,7 @@ from torch import nn
 from icmapper.data.types import MapClass, ego_to_world, pose_to_xy_yaw
 from icmapper.mapping.config import MapperConfig
 from icmapper.mapping.crossings import merge_crossing
+from icmapper.mapping.splice import splice_into
 from icmapper.models.detector import DetectorOutput, DetectorState, MapDetector
 from icmapper.models.losses import (
     DetectionCriterion,
@@ -265,7 +266,7 @@ class Stage2Objective(nn.Module):
     above the score threshold are matched to the GT (their IDs are the GT IDs: oracle identities
     for training), fused with the history of the same ID sampled from the online global map, and the
     fused points (detached) merged into the map (crossings by the ``[mapper]`` table's
-    ``crossing_merge``, as at inference)."""
+    ``crossing_merge``, fused polylines by its ``fused_merge``, as at inference)."""
 
     def __init__(
         self, net: ICMapperNet, cfg: TrainConfig, map_factory: Callable[[], Any] | None = None
@@ -281,7 +282,9 @@ class Stage2Objective(nn.Module):
         )
         self.cfg = cfg
         # the online map merges crossings by the rule the mapper will use (the [mapper] table)
-        self.crossing_merge = MapperConfig.from_dict(cfg.mapper).crossing_merge
+        mapper_cfg = MapperConfig.from_dict(cfg.mapper)
+        self.crossing_merge = mapper_cfg.crossing_merge
+        self.fused_merge, self.splice_overlap = mapper_cfg.fused_merge, mapper_cfg.splice_overlap
         for mod in (self.detector, self.association):
             mod.requires_grad_(False)
 
@@ -387,6 +390,8 @@ class Stage2Objective(nn.Module):
                     try:
                         if i in gmap and int(cls[j]) == MapClass.PED_CROSSING:
                             merge_crossing(gmap, i, world, final[j], r, t, self.crossing_merge)
+                        elif i in gmap and bool(has[j]) and self.fused_merge == "splice":
+                            splice_into(gmap, i, world, self.splice_overlap, t)
                         elif i in gmap:
                             gmap.merge(i, world, frame=t)
                         else:

@@ -22,10 +22,10 @@ import numpy as np
 
 from icmapper.data.types import Frame, MapClass, PerceptionRange, RANGE_60x30
 from icmapper.mapping.baselines.common import new_global_map, read_frame
-from icmapper.mapping.baselines.splice import overlap_fraction, splice_polyline
 from icmapper.mapping.config import MapperConfig
 from icmapper.mapping.crossings import merge_crossing
 from icmapper.mapping.methods import MethodInfo, register_method
+from icmapper.mapping.splice import overlap_fraction, splice_polyline
 from icmapper.mapping.types import DetectionSource, StepResult
 
 if TYPE_CHECKING:

@@ -19,8 +19,8 @@ from scipy.spatial import ConvexHull, QhullError
 
 from icmapper.data.types import MapClass
 from icmapper.mapping.baselines.post_track import PostTrack
-from icmapper.mapping.baselines.splice import inside_ring, ring_distance, splice_polyline
 from icmapper.mapping.methods import MethodInfo, register_method
+from icmapper.mapping.splice import inside_ring, ring_distance, splice_polyline
 
 if TYPE_CHECKING:
     pass

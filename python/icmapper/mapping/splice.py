@@ -1,16 +1,27 @@
-"""Rule-based polyline editing shared by the VMA-style and PolyMerge-style baselines: distances and
-arc-length projections onto a polyline, overlap fractions, and splicing a new observation into a
-stored polyline by projection (the overlapped part is replaced, the rest is kept on either side).
+"""Rule-based polyline editing: distances and arc-length projections onto a polyline, overlap
+fractions, and splicing a new observation into a stored polyline by projection (the overlapped
+part is replaced, the rest is kept on either side). Shared by the VMA-style and PolyMerge-style
+baselines, and by IC-Mapper for its fused polylines (``MapperConfig.fused_merge``,
+``splice_into``): a fused detection already combines the current view with the instance's history,
+so it replaces the stretch of the instance it covers instead of being averaged into it again.
 
 Plain numpy; all inputs (n, 2) float64 in one frame (the world frame in the baselines).
 """
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 from numpy.typing import NDArray
 
 from icmapper.geom import project_onto_polyline
+
+if TYPE_CHECKING:
+    from icmapper._icmap import GlobalMap
+
+#: The rules of ``MapperConfig.fused_merge``.
+FUSED_MERGES = ("splice", "fit")
 
 
 def ring_distance(points: NDArray[np.floating], ring: NDArray[np.floating]) -> NDArray[np.float64]:
@@ -80,3 +91,17 @@ def splice_polyline(
     before = p[(s_p <= s_q[0]) & ~covered]
     after = p[(s_p > s_q[1]) & ~covered]
     return np.concatenate([before, q, after])
+
+
+def splice_into(
+    global_map: GlobalMap,
+    target: int,
+    world: NDArray[np.floating],
+    overlap: float,
+    frame: int,
+) -> None:
+    """Replaces global instance ``target``'s polyline by ``splice_polyline(stored, world,
+    overlap)`` (world (n, 2) metres). ValueError (from the engine) for degenerate geometry."""
+    _, stored = global_map.get(int(target))
+    new = splice_polyline(np.asarray(stored, np.float64), np.asarray(world, np.float64), overlap)
+    global_map.replace(int(target), new, frame)
