@@ -195,10 +195,11 @@ def _crossing_parts(
     holes = ndimage.binary_fill_holes(comp) & ~comp
     hole_radius = ndimage.distance_transform_edt(holes) * 2 * half  # (X, Y) metres
     labels, n = ndimage.label(holes, _K8)
-    wide = ndimage.maximum(hole_radius, labels, np.arange(1, n + 1)) if n else np.zeros(0)
-    comp = comp | (holes & ~np.isin(labels, 1 + np.flatnonzero(np.asarray(wide) > p.max_hole)))
+    radius = np.asarray(ndimage.maximum(hole_radius, labels, np.arange(1, n + 1)) if n else [])
+    wide = 1 + np.flatnonzero(radius > p.max_hole)  # labels of the wide holes
+    comp = comp | (holes & ~np.isin(labels, wide))
     cells = np.argwhere(comp)  # (M, 2)
-    ring = bool(np.any(np.asarray(wide) > p.max_hole))
+    ring = len(wide) > 0
     if p.rectangularity <= 0 or (not ring and _fill(metres(cells), half) >= p.rectangularity):
         return [cells]
     starts: list[NDArray[np.float64]] = []
@@ -209,7 +210,7 @@ def _crossing_parts(
         ends.extend(v[1:])
 
     if ring:  # around an intersection: the crossings lie along the sides of its hole
-        for h in 1 + np.flatnonzero(np.asarray(wide) > p.max_hole):
+        for h in wide:
             hull = MultiPoint(metres(np.argwhere(labels == h))).convex_hull
             if isinstance(hull, Polygon):
                 add(np.asarray(hull.exterior.simplify(p.corner_tolerance).coords, np.float64))
