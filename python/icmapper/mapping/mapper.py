@@ -447,21 +447,18 @@ class Mapper:
         for j, tid in enumerate(track_ids.tolist()):
             world = ego_to_world(fused[j], pose)  # (P, 2)
             target = self._alias.get(tid, tid)  # the global instance this track maps into
-            if target in self._map and int(det.classes[j]) == MapClass.PED_CROSSING:
-                try:  # by the crossing rule (mapping.crossings)
-                    merge_crossing(
-                        self._map, target, world, fused[j], self.rng, frame_index,
-                        self.config.crossing_merge,
-                    )  # fmt: skip
-                except ValueError as exc:
-                    self._note_failure(frame_index, target, exc)
-                    continue
-                merged.append(target)
-                self.tracker.set_points(tid, world)
-                continue
-            if target in self._map and was_fused[j] and self.config.fused_merge == "splice":
-                try:  # the fusion already combined it with the history (mapping.splice)
-                    splice_into(self._map, target, world, self.config.splice_overlap, frame_index)
+            crossing = int(det.classes[j]) == MapClass.PED_CROSSING
+            spliced = bool(was_fused[j]) and self.config.fused_merge == "splice"
+            if target in self._map and (crossing or spliced):
+                try:
+                    if crossing:  # by the crossing rule (mapping.crossings)
+                        merge_crossing(
+                            self._map, target, world, fused[j], self.rng, frame_index,
+                            self.config.crossing_merge,
+                        )  # fmt: skip
+                    else:  # the fusion already combined it with the history (mapping.splice)
+                        cfg = self.config
+                        splice_into(self._map, target, world, cfg.splice_overlap, frame_index)
                 except ValueError as exc:
                     self._note_failure(frame_index, target, exc)
                     continue
