@@ -177,15 +177,13 @@ def seg_iou(checkpoint: Path, spec: str) -> dict[str, float]:
 def _nearest_chamfer(points: np.ndarray, truths: np.ndarray, closed: bool) -> float:
     """Symmetric Chamfer (m) of an instance (P, 2) to the nearest of truths (G, P', 2), both
     resampled to 100 points along the line (the ring for closed instances)."""
+    from icmapper.geom import cloud_chamfer
     from icmapper.models.vectorise import resample_polyline
 
     a = resample_polyline(np.asarray(points, np.float64), 100, closed)  # (100, 2)
-    best = np.inf
-    for t in truths:
-        b = resample_polyline(np.asarray(t, np.float64), 100, closed)
-        d = np.linalg.norm(a[:, None] - b[None], axis=-1)  # (100, 100)
-        best = min(best, 0.5 * float(d.min(0).mean() + d.min(1).mean()))
-    return best
+    return min(
+        cloud_chamfer(a, resample_polyline(np.asarray(t, np.float64), 100, closed)) for t in truths
+    )
 
 
 def fusion_gain(
