@@ -1,5 +1,6 @@
 """The crossing merge rule (icmapper.mapping.crossings): aligned ring averages, complete views
-averaged and cut views extended, noise that cancels instead of widening the crossing."""
+averaged, cut views merged only while they reveal more of a crossing, noise that cancels instead
+of widening the crossing."""
 
 from __future__ import annotations
 
@@ -9,7 +10,7 @@ from icmapper._icmap import GlobalMap
 from icmapper.data.types import RANGE_60x30
 from icmapper.geom import resample_many
 from icmapper.mapping.config import MapperConfig
-from icmapper.mapping.crossings import average_rings, is_complete, merge_crossing
+from icmapper.mapping.crossings import CrossingMerger, average_rings, is_complete
 
 
 def _rect(cx: float, cy: float, w: float, h: float, n: int = 20) -> np.ndarray:
@@ -76,37 +77,123 @@ def test_complete_views_average_out_and_union_widens() -> None:
     truth = _rect(0, 0, 10, 4, 40)
     gen = np.random.default_rng(0)
     maps = {rule: GlobalMap(smoothing=0.5, spacing=1.0) for rule in ("average", "union")}
-    for gm in maps.values():
+    rules = {rule: CrossingMerger(rule, RANGE_60x30) for rule in maps}
+    for rule, gm in maps.items():
         gm.insert_with_id(7, 0, truth, frame=0)
+        rules[rule].inserted(7, truth)
+    assert rules["average"].counts == {7: 1}
     for frame in range(1, 21):
         view = _rect(*gen.normal(0, 0.4, 2), 10 + gen.normal(0, 0.5), 4 + gen.normal(0, 0.5), 40)
         for rule, gm in maps.items():  # ego = world here: the pose is the identity
-            merge_crossing(gm, 7, view, view, RANGE_60x30, frame, rule)
+            assert rules[rule].merge(gm, 7, view, view, frame)
     averaged, union = maps["average"].get(7)[1], maps["union"].get(7)[1]
     assert maps["average"].info(7)["observations"] == 21
+    assert rules["average"].counts == {7: 21}
     assert _area(averaged) == pytest.approx(40.0, rel=0.1)
     assert _ring_distance(averaged, truth) < 0.5
     assert _area(union) > 1.5 * 40.0  # every noisy view widened it
 
 
-def test_a_view_cut_by_the_range_edge_extends_by_union() -> None:
-    """A crossing first seen cut at the range edge grows to its full extent by union once the
-    rest comes into view; complete views after that average."""
+def test_cut_views_extend_a_crossing_only_while_they_reveal_it() -> None:
+    """A crossing first seen cut at the range edge grows by union while a cut view shows more of
+    it; the first complete view replaces what the cut views built; cut views after it are left
+    out."""
     gm = GlobalMap(smoothing=0.5, spacing=1.0)
-    cut = _rect(25.0, 0, 8, 4)  # x 21..29: the part in range of a crossing reaching x = 33
-    gm.insert_with_id(1, 0, cut, frame=0)
-    ego_full = _rect(20.0, 0, 12, 4)  # seen whole after driving on: x 14..26 in the ego frame
-    world_full = ego_full + [7.0, 0.0]  # x 21..33 in the world
-    edge_ego = _rect(25.0, 0, 12, 4)  # the same crossing cut at the edge (x 19..31)
-    merge_crossing(gm, 1, world_full, edge_ego, RANGE_60x30, 1, "average")  # cut: union
-    assert _area(gm.get(1)[1]) == pytest.approx(48.0, rel=0.05)
-    merge_crossing(gm, 1, world_full, ego_full, RANGE_60x30, 2, "average")  # complete: mean
-    stored = gm.get(1)[1]
-    assert _ring_distance(stored, _rect(27.0, 0, 12, 4, 60)) < 0.3
+    rule = CrossingMerger("average", RANGE_60x30)
+    first = _rect(27.5, 0, 5, 4)  # x 25..30: the part in range of a crossing reaching x = 33
+    gm.insert_with_id(1, 0, first, frame=0)
+    rule.inserted(1, first)
+    assert rule.counts == {1: 0}  # cut by the edge: not complete
+    # seen again 2 m on (ego = world - 2): x 21..32, cut at ego x 30; 6 of its 11 m new -> union
+    more_world = _rect(26.5, 0, 11, 4)
+    more_ego = more_world - [2.0, 0.0]
+    assert rule.merge(gm, 1, more_world, more_ego, 1)
+    assert _area(gm.get(1)[1]) == pytest.approx(44.0, rel=0.05)
+    # the same part again, shifted by 0.3 m: nearly all inside the stored crossing -> left out
+    before = gm.get(1)[1].copy()
+    assert not rule.merge(gm, 1, more_world + [0.3, 0.2], more_ego + [0.3, 0.2], 2)
+    np.testing.assert_array_equal(gm.get(1)[1], before)
+    assert gm.info(1)["observations"] == 2  # a view left out is not an observation
+    # seen whole 6 m on (ego x 15..27): replaces the cut views' crossing
+    full_world = _rect(27.0, 0, 12, 4, 60)
+    full_ego = full_world - [6.0, 0.0]
+    assert rule.merge(gm, 1, full_world, full_ego, 3)
+    assert _ring_distance(gm.get(1)[1], full_world) < 0.05
+    assert rule.counts == {1: 1}
+    # a cut view that would add a lot is left out once the crossing was seen whole
+    assert not rule.merge(gm, 1, _rect(35.0, 0, 12, 4), _rect(30.0, 0, 12, 4), 4)
+    assert _ring_distance(gm.get(1)[1], full_world) < 0.05
+    # the next complete view is averaged with weight 1/2
+    shifted = full_world + [0.0, 1.0]
+    assert rule.merge(gm, 1, shifted, full_ego + [0.0, 1.0], 5)
+    assert _ring_distance(gm.get(1)[1], full_world + [0.0, 0.5]) < 0.05
+    assert rule.counts == {1: 2}
+
+
+def test_noisy_cut_views_do_not_widen_a_crossing() -> None:
+    """A crossing always cut by the side of the range (it reaches y = 17): twenty noisy views
+    leave it about as large as the first, where union grows it by more than half."""
+    gen = np.random.default_rng(1)
+    maps = {rule: GlobalMap(smoothing=0.5, spacing=1.0) for rule in ("average", "union")}
+    rules = {rule: CrossingMerger(rule, RANGE_60x30) for rule in maps}
+    first = _rect(0, 10.0, 4, 10, 40)  # y 5..15 in range: on the edge
+    for rule, gm in maps.items():
+        gm.insert_with_id(3, 0, first, frame=0)
+        rules[rule].inserted(3, first)
+    for frame in range(1, 21):
+        view = _rect(*gen.normal([0, 10], 0.4), 4 + gen.normal(0, 0.5), 10, 40)
+        for rule, gm in maps.items():
+            rules[rule].merge(gm, 3, view, view, frame)
+    assert rules["average"].counts == {3: 0}
+    assert _area(maps["average"].get(3)[1]) < 1.2 * 40.0
+    assert _area(maps["union"].get(3)[1]) > 1.5 * 40.0
+
+
+def test_a_collapsed_view_is_left_out() -> None:
+    """A complete view enclosing (almost) no area does not replace or move the crossing; a
+    crossing inserted from such a view is replaced by the first good complete view."""
+    gm = GlobalMap(smoothing=0.5, spacing=1.0)
+    rule = CrossingMerger("average", RANGE_60x30)
+    good = _rect(0, 0, 8, 4, 40)
+    gm.insert_with_id(1, 0, good, frame=0)
+    rule.inserted(1, good)
+    flat = _rect(0, 0, 8, 0.05, 40)  # 0.4 m^2
+    assert not rule.merge(gm, 1, flat, flat, 1)
+    assert _ring_distance(gm.get(1)[1], good) < 0.05 and rule.counts == {1: 1}
+    gm.insert_with_id(2, 0, flat + [20, 0], frame=0)
+    rule.inserted(2, flat + [20, 0])
+    assert rule.counts[2] == 0  # not seen whole
+    assert rule.merge(gm, 2, good + [20, 0], good + [20, 0], 1)
+    assert _area(gm.get(2)[1]) == pytest.approx(32.0, rel=0.02)
+
+
+def test_crossing_merger_rejects_bad_input() -> None:
     with pytest.raises(ValueError, match="crossing merge must be"):
-        merge_crossing(gm, 1, world_full, ego_full, RANGE_60x30, 3, "mean")
+        CrossingMerger("mean", RANGE_60x30)
+    gm = GlobalMap(smoothing=0.5, spacing=1.0)
+    ring = _rect(0, 0, 6, 4)
+    gm.insert_with_id(1, 0, ring, frame=0)
+    rule = CrossingMerger("average", RANGE_60x30)
+    rule.inserted(1, ring)
     with pytest.raises(KeyError):
-        merge_crossing(gm, 99, world_full, ego_full, RANGE_60x30, 3, "average")
+        rule.merge(gm, 99, ring, ring, 1)
+    bad = ring.copy()
+    bad[2, 1] = np.nan
+    with pytest.raises(ValueError, match=r"\(ego\) has NaN"):
+        rule.merge(gm, 1, ring, bad, 1)  # NaN in the ego frame is not a cut view
+    with pytest.raises(ValueError, match=r"\(world\) has NaN"):
+        rule.merge(gm, 1, bad, ring, 1)
+    with pytest.raises(ValueError, match="differ"):
+        rule.merge(gm, 1, ring, ring[:-1], 1)
+    with pytest.raises(ValueError, match=r"must be \(n >= 3, 2\)"):
+        rule.merge(gm, 1, ring[:2], ring[:2], 1)
+    assert gm.info(1)["observations"] == 1  # nothing merged
+    with pytest.raises(ValueError, match=">= 0"):
+        rule.reset({1: -1})
+    rule.reset({4: 2})
+    assert rule.counts == {4: 2}
+    rule.reset()
+    assert rule.counts == {}
 
 
 def test_mapper_config_names_the_crossing_rule() -> None:

@@ -52,6 +52,7 @@ def assert_same_state(a: Mapper, b: Mapper) -> None:
     assert [(t.id, t.cls, t.age, t.hits) for t in ta] == [(t.id, t.cls, t.age, t.hits) for t in tb]
     assert all(x.points.tobytes() == y.points.tobytes() for x, y in zip(ta, tb, strict=True))
     assert a._alias == b._alias and a._untracked == b._untracked
+    assert a.crossings.counts == b.crossings.counts
     for n in ("frames", "inserted", "merged", "reidentified", "aliased", "merge_failures"):
         assert getattr(a.stats, n) == getattr(b.stats, n), n
 
@@ -80,9 +81,14 @@ def test_oracle_resume_identical(tmp_path: Path, sim_seq: Sequence) -> None:
     resumed = Mapper.with_oracle(seq, noise="low", seed=3)
     resumed.resume(path)
     assert resumed.stats.frames == k + 1
+    saved_counts = np.load(state_path(path))["crossing_counts"]  # (c, 2): id, complete views
+    assert resumed.crossings.counts == {int(a): int(b) for a, b in saved_counts}
     got = [resumed.step(f) for f in frames[k + 1 :]]
     assert_same_steps(ref[k + 1 :], got)
     assert_same_state(full, resumed)
+    # the crossing rule's view counts travelled (the drive has a crossing before the save)
+    saved = np.load(state_path(path))["crossing_counts"]  # (c, 2)
+    assert saved.shape[0] >= 1 and saved.shape[1] == 2
     # the run exercises the restored buffer: some track of the resumed part existed before
     saved_ids = {int(i) for r in ref[: k + 1] for i in r.track_ids}
     assert saved_ids & {int(i) for r in got for i in r.track_ids}
@@ -173,6 +179,8 @@ def test_corrupt_sidecar_refused(tmp_path: Path, sim_seq: Sequence) -> None:
         arrays = {k: z[k] for k in z.files}
     for key, val in (
         ("version", np.array(99, np.int64)),
+        ("crossing_counts", np.array([[1, -1]], np.int64)),
+        ("crossing_counts", arrays["crossing_counts"].reshape(-1)),
         ("track_counts", arrays["track_counts"] + 1),
         ("track_points", arrays["track_points"][:1]),
         ("map_sha256", np.array("0" * 64)),
@@ -182,6 +190,13 @@ def test_corrupt_sidecar_refused(tmp_path: Path, sim_seq: Sequence) -> None:
         with sidecar.open("wb") as fh:
             np.savez(fh, **bad)
         refused(sidecar.read_bytes())
+
+    # a sidecar of the former format (before the crossing view counts) is named as such
+    old = {k: v for k, v in arrays.items() if k != "crossing_counts"}
+    with sidecar.open("wb") as fh:
+        np.savez(fh, **dict(old, version=np.array(1, np.int64)))
+    with pytest.raises(ValueError, match="format version 1, this build reads 2"):
+        victim.resume(path)
 
     # the intact pair still resumes
     sidecar.write_bytes(good)

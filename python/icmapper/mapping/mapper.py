@@ -19,7 +19,7 @@ Per frame (paper Fig. 2):
 6. merge into the global map (polylines: a fused one is spliced in, replacing the stretch it
    covers, by ``fused_merge``, since fusion already combined it with the history; an unfused one
    by curve fit; crossings by ``crossing_merge``: the running mean of complete views, union of
-   views cut by the range edge), or insert once the
+   views cut by the range edge that reveal more of a crossing), or insert once the
    track has been seen in ``min_hits`` frames (tentative tracks keep one-off false positives out
    of the map; an extension like step 3).
 """
@@ -44,7 +44,7 @@ from icmapper.data.types import (
     pose_to_xy_yaw,
 )
 from icmapper.mapping.config import MapperConfig
-from icmapper.mapping.crossings import merge_crossing
+from icmapper.mapping.crossings import CrossingMerger
 from icmapper.mapping.network_source import NetworkDetector
 from icmapper.mapping.reid import reidentify
 from icmapper.mapping.splice import splice_into
@@ -147,6 +147,7 @@ class Mapper:
         self.device = device
         self.name = name
         self.tracker = Tracker(self.config.assoc_threshold, self.config.max_age)
+        self.crossings = CrossingMerger(self.config.crossing_merge, rng)
         self._new_map()
         self.stats = MapperStats()
         self._untracked = UNTRACKED_ID_BASE
@@ -216,6 +217,7 @@ class Mapper:
         from icmapper._icmap import GlobalMap
 
         self._map = GlobalMap(smoothing=self.config.smoothing, spacing=self.config.spacing)
+        self.crossings.reset()
 
     @property
     def global_map(self) -> GlobalMap:
@@ -247,9 +249,12 @@ class Mapper:
         alias: dict[int, int],
         untracked: int | None = None,
         stats: MapperStats | None = None,
+        crossing_counts: dict[int, int] | None = None,
     ) -> None:
-        """Replaces the map, the aliases and (when given) the untracked-id counter and the stats:
-        used by ``mapping.state.resume``, which restores the tracker and the source itself."""
+        """Replaces the map, the aliases, the crossing rule's view counts (none given: none) and
+        (when given) the untracked-id counter and the stats: used by ``mapping.state.resume``,
+        which restores the tracker and the source itself."""
+        self.crossings.reset(crossing_counts)
         self._map = global_map
         self._alias = dict(alias)
         if untracked is not None:
@@ -452,10 +457,7 @@ class Mapper:
             if target in self._map and (crossing or spliced):
                 try:
                     if crossing:  # by the crossing rule (mapping.crossings)
-                        merge_crossing(
-                            self._map, target, world, fused[j], self.rng, frame_index,
-                            self.config.crossing_merge,
-                        )  # fmt: skip
+                        self.crossings.merge(self._map, target, world, fused[j], frame_index)
                     else:  # the fusion already combined it with the history (mapping.splice)
                         cfg = self.config
                         splice_into(self._map, target, world, cfg.splice_overlap, frame_index)
@@ -475,6 +477,8 @@ class Mapper:
             except ValueError as exc:  # degenerate geometry (e.g. a collapsed detection)
                 self._note_failure(frame_index, target, exc)
                 continue
+            if crossing:
+                self.crossings.inserted(tid, fused[j])
             inserted.append(tid)
             self.tracker.set_points(tid, world)
         if merge_items:

@@ -3,7 +3,8 @@
 ``save_state(mapper, path)`` writes the native global map file ``path`` and the sidecar
 ``<path>.state.npz`` (plain numpy arrays, no pickle, format ``STATE_VERSION``): the tracking buffer
 (ids, classes, world points, queries, ages, hits), the next track id, the track aliases, the
-untracked id counter, the stats, the SHA-256 of the map file (ties the pair together) and the
+crossing rule's complete-view counts (``mapping.crossings``), the untracked id counter, the
+stats, the SHA-256 of the map file (ties the pair together) and the
 detection source's memory when it has one (``state_dict()``, e.g. ``NetworkDetector``). Both files
 are written atomically.
 
@@ -30,14 +31,14 @@ if TYPE_CHECKING:
     from icmapper.mapping.mapper import Mapper, MapperStats
 
 #: Format version of the sidecar (``<map>.state.npz``).
-STATE_VERSION = 1
+STATE_VERSION = 2  # 2: the crossing rule's view counts
 #: Integer counters of ``MapperStats`` stored in the sidecar, in order.
 STAT_COUNTS = ("frames", "inserted", "merged", "reidentified", "aliased", "merge_failures")
 #: Arrays every sidecar holds (besides ``source.*``, the detection source's state).
 _STATE_KEYS = (
     "version", "map_sha256", "source_kind", "next_id", "untracked", "stats_counts",
-    "stats_seconds", "stats_failures", "alias", "track_ids", "track_cls", "track_age",
-    "track_hits", "track_counts", "track_points", "track_has_query", "track_queries",
+    "stats_seconds", "stats_failures", "alias", "crossing_counts", "track_ids", "track_cls",
+    "track_age", "track_hits", "track_counts", "track_points", "track_has_query", "track_queries",
 )  # fmt: skip
 
 
@@ -106,7 +107,11 @@ def resume(mapper: Mapper, path: str | Path) -> None:
         source.reset()
     mapper.tracker.restore(tracks, restore["next_id"])
     mapper.restore(
-        gmap, alias=restore["alias"], untracked=restore["untracked"], stats=restore["stats"]
+        gmap,
+        alias=restore["alias"],
+        untracked=restore["untracked"],
+        stats=restore["stats"],
+        crossing_counts=restore["crossing_counts"],
     )
 
 
@@ -136,6 +141,9 @@ def _state_arrays(mapper: Mapper) -> dict[str, NDArray[Any]]:
         "stats_seconds": np.array([st.seconds.get(n, 0.0) for n in STAGES], np.float64),
         "stats_failures": np.array(st.failures, dtype=str).reshape(-1),
         "alias": np.array(sorted(mapper.alias.items()), np.int64).reshape(-1, 2),  # (a, 2)
+        "crossing_counts": np.array(sorted(mapper.crossings.counts.items()), np.int64).reshape(
+            -1, 2
+        ),  # (c, 2): instance id, complete views
         "track_ids": np.array([t.id for t in tracks], np.int64),  # (t,)
         "track_cls": np.array([t.cls for t in tracks], np.int64),
         "track_age": np.array([t.age for t in tracks], np.int64),
@@ -208,6 +216,9 @@ def _parse_state(
     alias = _int_array(z, "alias", ndim=2)
     if alias.shape[1:] != (2,):
         raise ValueError(f"alias must be (a, 2), got {alias.shape}")
+    crossing = _int_array(z, "crossing_counts", ndim=2)
+    if crossing.shape[1:] != (2,) or np.any(crossing < 0):
+        raise ValueError(f"crossing_counts must be (c, 2) and >= 0, got {crossing.shape}")
     counts_s = _int_array(z, "stats_counts")
     seconds = z["stats_seconds"]
     if counts_s.shape != (len(STAT_COUNTS),) or seconds.shape != (len(STAGES),):
@@ -224,6 +235,7 @@ def _parse_state(
         "next_id": int(_int_array(z, "next_id", ndim=0)),
         "untracked": int(_int_array(z, "untracked", ndim=0)),
         "alias": {int(a): int(b) for a, b in alias},
+        "crossing_counts": {int(a): int(b) for a, b in crossing},
         "stats": stats,
     }
     return tracks, restore
@@ -240,6 +252,12 @@ def _read_state(sidecar: Path) -> dict[str, NDArray[Any]]:
             out = {k: z[k] for k in z.files}
     except (OSError, ValueError, EOFError, zipfile.BadZipFile, zlib.error, KeyError) as exc:
         raise ValueError(f"mapper state {sidecar} is not a valid state file: {exc}") from None
+    version = out.get("version")
+    if version is not None and version.shape == () and int(version) != STATE_VERSION:
+        raise ValueError(
+            f"mapper state {sidecar}: format version {int(version)}, this build reads "
+            f"{STATE_VERSION} (map again from the start, or load the map alone without its sidecar)"
+        )
     missing = set(_STATE_KEYS) - set(out)
     if missing:
         raise ValueError(f"mapper state {sidecar}: missing arrays {sorted(missing)}")

@@ -18,7 +18,7 @@ from torch import nn
 
 from icmapper.data.types import MapClass, ego_to_world, pose_to_xy_yaw
 from icmapper.mapping.config import MapperConfig
-from icmapper.mapping.crossings import merge_crossing
+from icmapper.mapping.crossings import CrossingMerger
 from icmapper.mapping.splice import splice_into
 from icmapper.models.detector import DetectorOutput, DetectorState, MapDetector
 from icmapper.models.losses import (
@@ -350,6 +350,7 @@ class Stage2Objective(nn.Module):
         n_terms, n_fused = 0, 0
         for b in range(batch["images"].shape[0]):
             gmap = self.map_factory()
+            crossings = CrossingMerger(self.crossing_merge, r)
             for t, out in enumerate(outs):
                 gt = prepare_gt(batch["gt"][b][t], det, dev)
                 pose = batch["poses"][b, t].cpu().numpy().astype(np.float64)
@@ -388,14 +389,17 @@ class Stage2Objective(nn.Module):
                 for j, i in enumerate(ids):
                     world = ego_to_world(final[j], pose)  # (P, 2)
                     try:
-                        if i in gmap and int(cls[j]) == MapClass.PED_CROSSING:
-                            merge_crossing(gmap, i, world, final[j], r, t, self.crossing_merge)
+                        crossing = int(cls[j]) == MapClass.PED_CROSSING
+                        if i in gmap and crossing:
+                            crossings.merge(gmap, i, world, final[j], t)
                         elif i in gmap and bool(has[j]) and self.fused_merge == "splice":
                             splice_into(gmap, i, world, self.splice_overlap, t)
                         elif i in gmap:
                             gmap.merge(i, world, frame=t)
                         else:
                             gmap.insert_with_id(i, int(cls[j]), world, frame=t)
+                            if crossing:
+                                crossings.inserted(i, final[j])
                     except ValueError:
                         # degenerate geometry (a collapsed or zig-zag detection): the map keeps
                         # what it had, as the online Mapper does

@@ -23,7 +23,7 @@ import numpy as np
 from icmapper.data.types import Frame, MapClass, PerceptionRange, RANGE_60x30
 from icmapper.mapping.baselines.common import new_global_map, read_frame
 from icmapper.mapping.config import MapperConfig
-from icmapper.mapping.crossings import merge_crossing
+from icmapper.mapping.crossings import CrossingMerger
 from icmapper.mapping.methods import MethodInfo, register_method
 from icmapper.mapping.splice import overlap_fraction, splice_polyline
 from icmapper.mapping.types import DetectionSource, StepResult
@@ -56,10 +56,12 @@ class PolyMerge:
         self.min_overlap = cfg.polymerge_min_overlap
         self.range = rng
         self.map: GlobalMap = new_global_map(cfg)
+        self.crossings = CrossingMerger(cfg.crossing_merge, rng)
 
     def reset(self) -> None:
         self.source.reset()
         self.map = new_global_map(self.config)
+        self.crossings.reset()
 
     def step(self, frame: Frame) -> StepResult:
         """Merges every detection of the frame into an overlapping instance or inserts it."""
@@ -83,13 +85,12 @@ class PolyMerge:
                     best, best_ov = int(gid), ov
             if best < 0:
                 best = int(self.map.insert(cls, world, frame.index))
+                if closed:
+                    self.crossings.inserted(best, dets.points[i])
                 inserted.append(best)
             else:
                 if closed:
-                    rule = self.config.crossing_merge
-                    merge_crossing(
-                        self.map, best, world, dets.points[i], self.range, frame.index, rule
-                    )
+                    self.crossings.merge(self.map, best, world, dets.points[i], frame.index)
                 else:
                     _, stored = self.map.get(best)
                     new = splice_polyline(np.asarray(stored, np.float64), world, self.buffer)

@@ -21,7 +21,7 @@ from numpy.typing import NDArray
 from icmapper.data.types import Frame, MapClass, PerceptionRange, RANGE_60x30
 from icmapper.mapping.baselines.common import new_global_map, read_frame
 from icmapper.mapping.config import MapperConfig
-from icmapper.mapping.crossings import merge_crossing
+from icmapper.mapping.crossings import CrossingMerger
 from icmapper.mapping.methods import MethodInfo, register_method
 from icmapper.mapping.tracker import Tracker, positional_affinity
 from icmapper.mapping.types import DetectionSource, StepResult
@@ -57,11 +57,13 @@ class PostTrack:
             threshold=float(np.exp(-cfg.gate / cfg.positional_scale)), max_age=cfg.max_age
         )
         self.map: GlobalMap = new_global_map(cfg)
+        self.crossings = CrossingMerger(cfg.crossing_merge, rng)
 
     def reset(self) -> None:
         self.source.reset()
         self.tracker.reset()
         self.map = new_global_map(self.config)
+        self.crossings.reset()
 
     def step(self, frame: Frame) -> StepResult:
         """Detects, links detections to tracks, inserts / merges each into the global map."""
@@ -89,12 +91,13 @@ class PostTrack:
         under id `tid`; True if it was merged."""
         if tid in self.map:
             if MapClass(cls).closed:
-                rule = self.config.crossing_merge
-                merge_crossing(self.map, tid, world, ego, self.range, frame, rule)
+                self.crossings.merge(self.map, tid, world, ego, frame)
             else:
                 self.map.merge(tid, world, frame)
             return True
         self.map.insert_with_id(tid, cls, world, frame)
+        if MapClass(cls).closed:
+            self.crossings.inserted(tid, ego)
         return False
 
     def finish(self) -> GlobalMap:
