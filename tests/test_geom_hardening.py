@@ -229,6 +229,9 @@ POINT_ENTRY_POINTS: dict[str, Any] = {
     "merge_divider": lambda p: _map_with_line().merge(0, p),
     "merge_crossing": lambda p: _map_with_line().merge(1, p),
     "replace": lambda p: _map_with_line().replace(0, p),
+    "splice_polyline_stored": lambda p: geom.splice_polyline(p, LINE, 0.5),
+    "splice_polyline_new": lambda p: geom.splice_polyline(LINE, p, 0.5),
+    "splice": lambda p: _map_with_line().splice(0, p, 0.5),
 }
 
 

@@ -87,6 +87,17 @@ def merge_polyline(
     ``spacing`` as for ``fit_curve``.
     """
 
+def splice_polyline(stored: ArrayLike2, new: ArrayLike2, overlap: float) -> F64:
+    """Splices a new open polyline into a stored one by projection (the rule of IC-Mapper's fused
+    polylines and of the VMA / PolyMerge baselines).
+
+    stored (m, 2), new (q, 2), both with >= 2 points, one frame. ``new`` is oriented like
+    ``stored``; stored points within ``overlap`` metres of ``new`` are substituted by it; the stored
+    points before the projection of new's start and after the projection of its end are kept.
+    Returns (r, 2) float64. ValueError for too few points, NaN/inf or out-of-domain coordinates and
+    an ``overlap`` that is not finite and >= 0.
+    """
+
 def polygon_union(rings: Sequence[ArrayLike2] | npt.NDArray[np.floating[Any]]) -> list[F64]:
     """Union of closed rings (each (n_i, 2) without a repeated first point, or an (R, n, 2) array).
 
@@ -183,6 +194,12 @@ class GlobalMap:
         ``spacing``) as a new observation at ``frame``: first frame kept, last frame and
         observation count updated. For merge rules implemented outside the store (baselines).
         KeyError for an unknown id; ValueError for bad geometry (the instance is unchanged)."""
+
+    def splice(self, id: int, points: ArrayLike2, overlap: float = 0.5, frame: int = 0) -> None:
+        """Splices the open polyline ``points`` (n, 2) world frame into instance ``id``
+        (``splice_polyline(stored, points, overlap)``), resampled at ``spacing``, as a new
+        observation at ``frame`` (as ``replace``). KeyError for an unknown id; ValueError for a
+        crossing instance, bad geometry or a bad ``overlap`` (the instance is unchanged)."""
 
     def remove(self, id: int) -> None:
         """Removes instance ``id``; KeyError if absent."""

@@ -22,6 +22,8 @@ fit_curve(points (n, 2), s=0.5, spacing=1.0) -> (m, 2)
     Smoothing cubic spline with scipy ``splprep(s=s)`` semantics, evaluated ~``spacing`` apart.
 merge_polyline(global_pts (n, 2), detected_pts (d, 2), s=0.5, spacing=1.0) -> (m, 2)
     IC-Mapper Algorithm 2: reorder, concatenate, fit; keeps the global direction.
+splice_polyline(stored (m, 2), new (q, 2), overlap) -> (r, 2)
+    The stretch of ``stored`` that ``new`` covers (points within ``overlap``) replaced by it.
 polygon_union(rings: list[(n_i, 2)]) -> list[(m, 2)]
     Outer rings of the union, counter-clockwise, largest first.
 chamfer_distance(a (n, 2), b (m, 2)) -> float
@@ -64,6 +66,7 @@ from icmapper._icmap import (
     polygon_union,
     resample,
     resample_spacing,
+    splice_polyline,
 )
 
 __all__ = [
@@ -84,6 +87,7 @@ __all__ = [
     "resample",
     "resample_many",
     "resample_spacing",
+    "splice_polyline",
 ]
 
 

@@ -1,8 +1,8 @@
 //! # icmap-geom
 //!
 //! The geometry core of icmapper: the global vector-map store with its spatial index, patch
-//! clipping and even sampling, curve-fit merging of polylines, polygon union of crossings and
-//! Chamfer distances. Pure Rust: no Python in this crate (the binding lives in `icmap-py`).
+//! clipping and even sampling, curve-fit merging and splicing of polylines, polygon union of
+//! crossings and Chamfer distances. Pure Rust: no Python in this crate (the binding lives in `icmap-py`).
 //!
 //! Conventions (see the project's `docs/architecture.md`): metres and radians, world frame
 //! coordinates in `f64`, poses as `(x, y, yaw)` ego -> world, classes `0 ped_crossing` (closed
@@ -20,6 +20,7 @@ pub mod persist;
 pub mod persist_v2;
 pub mod provenance;
 pub mod resample;
+pub mod splice;
 pub mod store;
 pub mod types;
 pub mod union;
@@ -32,6 +33,7 @@ pub use fit::fit_curve;
 pub use merge::{merge_polygon, merge_polyline};
 pub use merge_map::{MergeMapParams, MergeMapStats};
 pub use resample::{dedup, polyline_length, resample, resample_spacing};
+pub use splice::splice_polyline;
 pub use store::{GlobalMap, Instance, MapConfig, PatchSample};
 pub use types::{validate_points, MapClass, Patch, Point, Pose2};
 pub use union::polygon_union;

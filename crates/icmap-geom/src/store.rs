@@ -557,6 +557,27 @@ impl GlobalMap {
         self.commit(slot, id, stored, 1, frame)
     }
 
+    /// Splices the open polyline `points` into instance `id` ([`crate::splice::splice_polyline`]
+    /// with `overlap` metres: the stretch it covers is replaced, the rest kept on either side),
+    /// then resamples at `spacing` as [`Self::replace`] does, as a new observation at `frame`.
+    /// Errors on an unknown id, a crossing (closed) instance, bad geometry or a bad `overlap`; the
+    /// instance is then unchanged.
+    pub fn splice(&mut self, id: u64, points: &[Point], overlap: f64, frame: i64) -> Result<()> {
+        let slot = *self.id_to_slot.get(&id).ok_or(GeomError::UnknownId(id))?;
+        let inst = self.slots[slot as usize]
+            .as_ref()
+            .ok_or(GeomError::UnknownId(id))?;
+        if inst.closed {
+            return Err(GeomError::InvalidParameter {
+                name: "id",
+                reason: format!("instance {id} is a crossing; splicing applies to polylines"),
+            });
+        }
+        let spliced = crate::splice::splice_polyline(&inst.points, points, overlap)?;
+        let stored = self.prepare(inst.class, &spliced)?;
+        self.commit(slot, id, stored, 1, frame)
+    }
+
     /// Stores new geometry of the instance in `slot` as `observed` more observations at `frame`.
     fn commit(
         &mut self,

@@ -632,8 +632,10 @@ mod tests {
             let rf = crate::resample::resample_spacing(f, 1.0, true).unwrap();
             let rs = crate::resample::resample_spacing(s, 1.0, true).unwrap();
             let pf = crate::resample::polyline_length(f, true);
+            // the overlay snaps its vertices to the grid, and an intersection of two nearly
+            // parallel edges moves by a grid step over the sine of their angle (1.4e-6 m seen)
             assert!(
-                (pf - perim).abs() < 1e-6,
+                (pf - perim).abs() < 1e-5,
                 "perimeter fast {pf} overlay {perim}"
             );
             if rf.len() != rs.len() {

@@ -13,8 +13,8 @@
 use icmap_geom::persist::{fnv1a64, from_bytes, to_bytes};
 use icmap_geom::{
     chamfer_distance, chamfer_matrix, clip_polygon, clip_polyline, fit_curve, merge_polygon,
-    merge_polyline, polygon_union, resample, resample_spacing, GlobalMap, Instance, MapClass,
-    MapConfig, Patch, Point, Pose2,
+    merge_polyline, polygon_union, resample, resample_spacing, splice_polyline, GlobalMap,
+    Instance, MapClass, MapConfig, Patch, Point, Pose2,
 };
 use proptest::prelude::*;
 use std::alloc::{GlobalAlloc, Layout, System};
@@ -189,6 +189,7 @@ proptest! {
             if let Ok(out) = fit_curve(&a, s, sp) { check(&out); }
             if let Ok(out) = merge_polyline(&a, &b, s, sp) { check(&out); }
             if let Ok(out) = merge_polygon(&b, &a, sp) { check(&out); }
+            if let Ok(out) = splice_polyline(&a, &b, s) { check(&out); }
             if let Ok(out) = polygon_union(&[a.clone(), b.clone()]) {
                 for r in &out { check(r); }
             }
@@ -208,6 +209,7 @@ proptest! {
                     let _ = m.insert(MapClass::PedCrossing, &b, 0);
                     let _ = m.merge(0, &b, 1);
                     let _ = m.merge(1, &a, 1);
+                    let _ = m.splice(0, &b, s, 2);
                     let _ = m.query(&patch);
                     if let Ok(sample) = m.sample_patch(&patch, n.clamp(0, 200)) {
                         check(&sample.points);

@@ -79,6 +79,25 @@ pub fn clip_to_patch<'py>(
     Ok(list_of_arrays(py, &parts))
 }
 
+/// Splices a new open polyline into a stored one by projection: stored points within `overlap`
+/// metres of `new` are replaced by it, the rest kept before and after it (`new` oriented like
+/// `stored`).
+#[pyfunction]
+#[pyo3(signature = (stored, new, overlap))]
+pub fn splice_polyline<'py>(
+    py: Python<'py>,
+    stored: &Bound<'py, PyAny>,
+    new: &Bound<'py, PyAny>,
+    overlap: f64,
+) -> PyResult<Bound<'py, PyArray2<f64>>> {
+    let a = points_arg(stored, "stored")?;
+    let b = points_arg(new, "new")?;
+    let out = py
+        .detach(|| geom::splice_polyline(&a, &b, overlap))
+        .py_err()?;
+    Ok(points_to_py(py, &out))
+}
+
 /// Smoothing cubic spline fit (scipy `splprep(s=s)` semantics), evaluated about `spacing` apart.
 #[pyfunction]
 #[pyo3(signature = (points, s = 0.5, spacing = 1.0))]

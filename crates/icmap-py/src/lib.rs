@@ -22,6 +22,7 @@ fn _icmap(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(functions::clip_to_patch, m)?)?;
     m.add_function(wrap_pyfunction!(functions::fit_curve, m)?)?;
     m.add_function(wrap_pyfunction!(functions::merge_polyline, m)?)?;
+    m.add_function(wrap_pyfunction!(functions::splice_polyline, m)?)?;
     m.add_function(wrap_pyfunction!(functions::polygon_union, m)?)?;
     m.add_function(wrap_pyfunction!(functions::chamfer_distance, m)?)?;
     m.add_function(wrap_pyfunction!(functions::chamfer_matrix, m)?)?;

@@ -268,6 +268,33 @@ impl PyGlobalMap {
         py.detach(|| self.write()?.replace(id, &pts, frame).py_err())
     }
 
+    /// Splices the open polyline `points` (world frame) into instance `id`: the stretch it covers
+    /// (stored points within `overlap` metres) is replaced, the rest kept on either side; a new
+    /// observation at `frame`. Small splices run with the GIL held, as small merges do.
+    #[pyo3(signature = (id, points, overlap = 0.5, frame = 0))]
+    fn splice(
+        &self,
+        py: Python<'_>,
+        id: &Bound<'_, PyAny>,
+        points: &Bound<'_, PyAny>,
+        overlap: f64,
+        #[pyo3(from_py_with = frame_arg)] frame: i64,
+    ) -> PyResult<()> {
+        let id = id_arg(id)?;
+        let pts = points_arg(points, "points")?;
+        if pts.len() <= GIL_HELD_MERGE_POINTS {
+            if let Ok(mut map) = self.inner.try_write() {
+                let small = map
+                    .get(id)
+                    .is_none_or(|inst| inst.points.len() + pts.len() <= GIL_HELD_MERGE_POINTS);
+                if small {
+                    return map.splice(id, &pts, overlap, frame).py_err();
+                }
+            }
+        }
+        py.detach(|| self.write()?.splice(id, &pts, overlap, frame).py_err())
+    }
+
     /// Removes instance `id` (KeyError if absent).
     fn remove(&self, py: Python<'_>, id: &Bound<'_, PyAny>) -> PyResult<()> {
         let id = id_arg(id)?;
