@@ -64,6 +64,13 @@ class FakeMap:
         n = self.items[i][1].shape[0]  # keeps the sampled size of sample_patch
         self.items[i] = (self.items[i][0], resample_many(np.asarray(pts)[None], n, True)[0])
 
+    def splice(self, i: int, pts: np.ndarray, overlap: float = 0.5, frame: int = 0) -> None:
+        from icmapper.geom import resample_many, splice_polyline
+
+        n = self.items[i][1].shape[0]  # keeps the sampled size of sample_patch
+        new = splice_polyline(np.asarray(self.items[i][1], np.float64), pts, overlap)
+        self.items[i] = (self.items[i][0], resample_many(new[None], n, False)[0])
+
     def sample_patch(self, pose, half, margin=20.0, n_points=20):
         x, y, yaw = pose
         c, s = np.cos(yaw), np.sin(yaw)
