@@ -150,6 +150,49 @@ def test_empty_and_bad_input() -> None:
         VectoriseParams(rectangularity=1.5)
     with pytest.raises(ValueError, match="corner_tolerance"):
         VectoriseParams(corner_tolerance=-1.0)
+    with pytest.raises(ValueError, match="ridge_threshold"):
+        VectoriseParams(ridge_threshold=0.0)
+    with pytest.raises(ValueError, match="ridge_sigma"):
+        VectoriseParams(ridge_sigma=0.0)
+    with pytest.raises(ValueError, match="ridge_curvature"):
+        VectoriseParams(ridge_curvature=-0.1)
+    with pytest.raises(ValueError, match="ridge_classes"):
+        VectoriseParams(ridge_classes=(0,))  # crossings are no lines
+
+
+def _parallel_dividers(half_gap: float, width: float) -> np.ndarray:
+    """Probabilities (3, 50, 25) of two dividers along x at y = +-half_gap (Gaussian profile of
+    std ``width`` m, peak 0.95), tapering out beyond |x| = 20 m."""
+    xs = (np.arange(50) + 0.5) * 2 * HX / 50 - HX
+    ys = (np.arange(25) + 0.5) * 2 * HY / 25 - HY
+    taper = 1 / (1 + np.exp((np.abs(xs) - 20) / 1.5))  # (50,)
+    prob = np.zeros((3, 50, 25))
+    for y0 in (-half_gap, half_gap):
+        line = 0.95 * np.exp(-((ys[None, :] - y0) ** 2) / (2 * width**2)) * taper[:, None]
+        prob[1] = np.maximum(prob[1], line)
+    return prob
+
+
+def test_neighbouring_dividers_stay_apart() -> None:
+    """Two dividers 3 m apart whose probabilities stay above 0.5 between them (0.49 only at the
+    very middle of the BEV cells): the ridge gives both, full length; the plain threshold's
+    skeleton of the merged blob gave a line between them and stubs."""
+    prob = _parallel_dividers(1.5, 1.3)
+    assert prob[1, 25, 12] > 0.45  # the valley between them
+    got = vectorise(prob, HX, HY)
+    assert len(got) == 2 and set(got.classes.tolist()) == {1}
+    side = sorted(float(p[:, 1].mean()) for p in got.points)
+    assert side[0] == pytest.approx(-1.5, abs=0.5) and side[1] == pytest.approx(1.5, abs=0.5)
+    for p in got.points:
+        assert np.ptp(p[:, 0]) > 30.0  # the whole line
+        assert np.abs(p[:, 1] - p[:, 1].mean()).max() < 0.5  # straight
+    plain = vectorise(prob, HX, HY, VectoriseParams(ridge_classes=()))
+    assert sum(np.ptp(p[:, 0]) > 30.0 for p in plain.points) < 2
+    # lines well apart come out the same way with either rule
+    far = _parallel_dividers(4.0, 0.8)
+    for prm in (VectoriseParams(), VectoriseParams(ridge_classes=())):
+        v = vectorise(far, HX, HY, prm)
+        assert sorted(round(float(p[:, 1].mean())) for p in v.points) == [-4, 4]
 
 
 def test_resample_polyline() -> None:

@@ -5,6 +5,12 @@ The segmentation head (``models.segmentation``) reads the BEV far better than th
 from the masks instead (``model.instances = "segmentation"``):
 
 - the class probabilities (K, X, Y) are upsampled ``upsample`` times (bilinear) and thresholded;
+- a divider mask is the ridge of its probabilities (``ridge_classes``): cells above
+  ``ridge_threshold`` where the probability curves downwards across the line (the smaller
+  eigenvalue of its Hessian, at scale ``ridge_sigma``, below -``ridge_curvature``). Dividers of
+  neighbouring lanes lie 2-3 BEV cells apart, and at the plain threshold their masks merge into one
+  blob whose skeleton wanders between them; the valley between two lines curves upwards, so the
+  ridge keeps them apart (validation AP_div 57.9 -> 66.7, checkpoint README);
 - a divider or boundary mask is thinned to its skeleton (scikit-image); the skeleton is cut at its
   junctions into branches, each branch is ordered into a polyline, simplified and resampled to P
   points; branches shorter than ``min_length`` metres are dropped;
@@ -32,6 +38,8 @@ if TYPE_CHECKING:
 
 #: Class index of crossings (closed contours); the other classes are open polylines.
 CROSSING = 0
+#: Class index of dividers (the default ``ridge_classes``).
+DIVIDER = 1
 _K8 = np.ones((3, 3), dtype=np.int64)
 
 
@@ -50,19 +58,30 @@ class VectoriseParams:
     # by this tolerance (0: their minimum rotated rectangle), then shrunk by ``shrink``
     max_hole: float = 2.0  # a crossing mask around a hole of larger inscribed radius is split
     simplify: float = 0.2  # Douglas-Peucker tolerance of line branches before resampling
+    ridge_classes: tuple[int, ...] = (DIVIDER,)  # line classes whose mask is their ridge
+    ridge_threshold: float = 0.3  # probability above which a ridge cell may belong to the class
+    ridge_sigma: float = 0.6  # metres; Gaussian scale of the Hessian
+    ridge_curvature: float = 0.22  # 1/m^2; a ridge curves down across the line by more than this
     num_points: int = 20  # points per instance
 
     def __post_init__(self) -> None:
         if self.upsample < 1 or self.num_points < 2:
             raise ValueError("vectorise: upsample must be >= 1 and num_points >= 2")
-        if not 0.0 < self.threshold < 1.0:
-            raise ValueError(f"vectorise: threshold must be in (0, 1), got {self.threshold}")
+        for key in ("threshold", "ridge_threshold"):
+            if not 0.0 < getattr(self, key) < 1.0:
+                raise ValueError(f"vectorise: {key} must be in (0, 1), got {getattr(self, key)}")
+        if not self.ridge_sigma > 0 or not np.isfinite(self.ridge_sigma):
+            raise ValueError(f"vectorise: ridge_sigma must be > 0, got {self.ridge_sigma}")
+        if not all(isinstance(k, int) and k >= 0 and k != CROSSING for k in self.ridge_classes):
+            raise ValueError(
+                f"vectorise: ridge_classes must be line class indices, got {self.ridge_classes}"
+            )
         if not 0.0 <= self.rectangularity <= 1.0:
             raise ValueError(
                 f"vectorise: rectangularity must be in [0, 1], got {self.rectangularity}"
             )
         for key in ("min_length", "min_area", "shrink", "simplify", "corner_tolerance", "max_hole",
-                    "hull_simplify"):  # fmt: skip
+                    "hull_simplify", "ridge_curvature"):  # fmt: skip
             if not getattr(self, key) >= 0:
                 raise ValueError(f"vectorise: {key} must be >= 0, got {getattr(self, key)}")
 
@@ -241,6 +260,20 @@ def _crossing_parts(
     return [q for q in parts if len(q) * cell_area >= p.min_area]
 
 
+def _ridge_mask(
+    prob: NDArray[np.floating], p: VectoriseParams, cell: tuple[float, float]
+) -> NDArray[np.bool_]:
+    """Cells on a bright ridge of ``prob`` (X, Y), cells of ``cell`` metres: above
+    ``ridge_threshold`` where the smaller eigenvalue of the Hessian (Gaussian scale ``ridge_sigma``)
+    is below -``ridge_curvature``. -> (X, Y) bool."""
+    from skimage.feature import hessian_matrix, hessian_matrix_eigvals
+
+    px = float(np.sqrt(cell[0] * cell[1]))  # metres per cell
+    h = hessian_matrix(prob, sigma=p.ridge_sigma / px, order="rc", use_gaussian_derivatives=False)
+    low = hessian_matrix_eigvals(h)[1]  # (X, Y) the smaller eigenvalue, per cell^2
+    return (prob > p.ridge_threshold) & (low < -p.ridge_curvature * px * px)
+
+
 def vectorise(
     prob: NDArray[np.floating],
     half_x: float,
@@ -275,7 +308,10 @@ def vectorise(
     scores: list[float] = []
     points: list[NDArray[np.float32]] = []
     for k in range(k_num):
-        mask = prob[k] > p.threshold
+        if k in p.ridge_classes:
+            mask = _ridge_mask(prob[k], p, (sx, sy))
+        else:
+            mask = prob[k] > p.threshold
         if not mask.any():
             continue
         if k == CROSSING:
