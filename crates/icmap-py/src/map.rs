@@ -87,6 +87,31 @@ impl PyGlobalMap {
     fn write(&self) -> PyResult<RwLockWriteGuard<'_, geom::GlobalMap>> {
         self.inner.write().map_err(|_| poisoned())
     }
+
+    /// Runs `f`, an edit of instance `id` with `n_new` new points. Such an edit of an instance of
+    /// a few hundred points takes microseconds, of which releasing and re-taking the GIL would be
+    /// a noticeable share: when the map's lock is free at once and the instance and the new
+    /// points stay within `GIL_HELD_MERGE_POINTS`, it runs with the GIL held. Larger edits, and
+    /// any edit that would have to wait for another thread, release the GIL.
+    fn edit_small(
+        &self,
+        py: Python<'_>,
+        id: u64,
+        n_new: usize,
+        f: impl FnOnce(&mut geom::GlobalMap) -> geom::Result<()> + Send,
+    ) -> PyResult<()> {
+        if n_new <= GIL_HELD_MERGE_POINTS {
+            if let Ok(mut map) = self.inner.try_write() {
+                let small = map
+                    .get(id)
+                    .is_none_or(|inst| inst.points.len() + n_new <= GIL_HELD_MERGE_POINTS);
+                if small {
+                    return f(&mut map).py_err();
+                }
+            }
+        }
+        py.detach(|| f(&mut *self.write()?).py_err())
+    }
 }
 
 /// Largest merge (stored plus detected points) that `merge` runs without releasing the GIL
@@ -181,21 +206,7 @@ impl PyGlobalMap {
     ) -> PyResult<()> {
         let id = id_arg(id)?;
         let pts = points_arg(points, "points")?;
-        // A merge of a detection into an instance of a few hundred points takes microseconds, of
-        // which releasing and re-taking the GIL would be a noticeable share: when the map's lock
-        // is free at once, such a merge runs with the GIL held. Larger merges, and any merge
-        // that would have to wait for another thread, release the GIL.
-        if pts.len() <= GIL_HELD_MERGE_POINTS {
-            if let Ok(mut map) = self.inner.try_write() {
-                let small = map
-                    .get(id)
-                    .is_none_or(|inst| inst.points.len() + pts.len() <= GIL_HELD_MERGE_POINTS);
-                if small {
-                    return map.merge(id, &pts, frame).py_err();
-                }
-            }
-        }
-        py.detach(|| self.write()?.merge(id, &pts, frame).py_err())
+        self.edit_small(py, id, pts.len(), |map| map.merge(id, &pts, frame))
     }
 
     /// Merges many detections at `frame` (`points[i]` into `ids[i]`): the same map as calling
@@ -270,7 +281,8 @@ impl PyGlobalMap {
 
     /// Splices the open polyline `points` (world frame) into instance `id`: the stretch it covers
     /// (stored points within `overlap` metres) is replaced, the rest kept on either side; a new
-    /// observation at `frame`. Small splices run with the GIL held, as small merges do.
+    /// observation at `frame`. Small splices run with the GIL held, as small merges do
+    /// (`edit_small`).
     #[pyo3(signature = (id, points, overlap = 0.5, frame = 0))]
     fn splice(
         &self,
@@ -282,17 +294,9 @@ impl PyGlobalMap {
     ) -> PyResult<()> {
         let id = id_arg(id)?;
         let pts = points_arg(points, "points")?;
-        if pts.len() <= GIL_HELD_MERGE_POINTS {
-            if let Ok(mut map) = self.inner.try_write() {
-                let small = map
-                    .get(id)
-                    .is_none_or(|inst| inst.points.len() + pts.len() <= GIL_HELD_MERGE_POINTS);
-                if small {
-                    return map.splice(id, &pts, overlap, frame).py_err();
-                }
-            }
-        }
-        py.detach(|| self.write()?.splice(id, &pts, overlap, frame).py_err())
+        self.edit_small(py, id, pts.len(), |map| {
+            map.splice(id, &pts, overlap, frame)
+        })
     }
 
     /// Removes instance `id` (KeyError if absent).
