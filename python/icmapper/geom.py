@@ -38,6 +38,8 @@ Python functions (below; numpy, and the engine where it is faster — measured b
 
 resample_many(points (N, n, 2), n_out, closed) -> (N, n_out, 2)
     ``resample`` over a table of instances; also total on degenerate rows (zero length).
+signed_ring_area(ring (n, 2)) -> float
+    Shoelace area of a ring, positive counter-clockwise.
 arc_lengths(points (n, 2)) -> (n,);  points_at_lengths(points (n, 2), s (m,)) -> (m, 2)
     Cumulative arc length of one polyline; its points at given arc lengths (clamped to the ends).
 chamfer_pairs(a (P, n, 2), b (P, m, 2)) -> (P,)
@@ -87,6 +89,7 @@ __all__ = [
     "resample",
     "resample_many",
     "resample_spacing",
+    "signed_ring_area",
     "splice_polyline",
 ]
 
@@ -170,6 +173,14 @@ def project_onto_polyline(
     j = np.argmax(d <= d.min(axis=1, keepdims=True) + tie_tol, axis=1)  # (n,) first near-best
     rows = np.arange(p.shape[0])
     return d[rows, j], s0[j] + t[rows, j] * seg_len[j]
+
+
+def signed_ring_area(ring: ArrayLike) -> float:
+    """Area enclosed by a ring (n, 2) (first point not repeated; shoelace): positive when the ring
+    runs counter-clockwise, negative clockwise."""
+    r = np.asarray(ring, dtype=np.float64).reshape(-1, 2)
+    x, y = r[:, 0], r[:, 1]
+    return 0.5 * float(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1)))
 
 
 def arc_lengths(points: ArrayLike) -> NDArray[np.float64]:

@@ -12,6 +12,7 @@
 //!    `new`, then the stored points after the projection of its end (arc lengths along `stored`).
 
 use crate::error::{GeomError, Result};
+use crate::resample::polyline_length;
 use crate::types::{validate_points, Point};
 
 /// The nearest point of the open polyline `poly` (at least one point) to `p`: its distance and
@@ -38,10 +39,6 @@ pub fn project_onto_polyline(p: &Point, poly: &[Point]) -> (f64, f64) {
     (best_d, best_s)
 }
 
-fn length(poly: &[Point]) -> f64 {
-    poly.windows(2).map(|w| (w[1] - w[0]).norm()).sum()
-}
-
 /// `new` in the direction of `stored`: reversed when its end projects before its start along
 /// `stored`. When both ends project to the same place (`new` lies beyond one end of `stored`),
 /// the end of `new` nearer to the end of `stored` it continues comes first (after the end) or
@@ -51,7 +48,7 @@ pub fn orient_like(stored: &[Point], new: &[Point]) -> Vec<Point> {
         .iter()
         .map(|p| project_onto_polyline(p, stored).1)
         .collect();
-    let total = length(stored);
+    let total = polyline_length(stored, false);
     let tol = 1e-6 * total.max(1.0);
     let (first, last) = (s[0], s[s.len() - 1]);
     let forward = if last - first > tol {

@@ -60,8 +60,9 @@ def _length(points: NDArray[np.float64], closed: bool) -> float:
 
 
 def _area(ring: NDArray[np.float64]) -> float:
-    x, y = ring[:, 0], ring[:, 1]
-    return 0.5 * abs(float(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1))))
+    from icmapper import geom
+
+    return abs(geom.signed_ring_area(ring))
 
 
 @dataclass

@@ -39,7 +39,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from icmapper.data.types import PerceptionRange
-from icmapper.geom import resample_many
+from icmapper.geom import resample_many, signed_ring_area
 
 if TYPE_CHECKING:
     from icmapper._icmap import GlobalMap
@@ -68,9 +68,7 @@ def is_complete(
 
 
 def _ccw(ring: NDArray[np.float64]) -> NDArray[np.float64]:
-    x, y = ring[:, 0], ring[:, 1]
-    area2 = float((x * np.roll(y, -1) - np.roll(x, -1) * y).sum())
-    return ring[::-1].copy() if area2 < 0 else ring
+    return ring[::-1].copy() if signed_ring_area(ring) < 0 else ring
 
 
 def average_rings(
@@ -94,12 +92,6 @@ def average_rings(
     shifts = np.stack([np.roll(b, k, axis=0) for k in range(n)])  # (n, n, 2)
     k = int(((shifts - a[None]) ** 2).sum(axis=(1, 2)).argmin())
     return (1.0 - weight) * a + weight * shifts[k]
-
-
-def _ring_area(ring: NDArray[np.floating]) -> float:
-    """Area enclosed by a ring (n, 2) (shoelace; the first point not repeated)."""
-    x, y = np.asarray(ring, np.float64)[:, 0], np.asarray(ring, np.float64)[:, 1]
-    return 0.5 * abs(float((x * np.roll(y, -1) - np.roll(x, -1) * y).sum()))
 
 
 def _area_outside(view: NDArray[np.float64], stored: NDArray[np.float64]) -> float:
@@ -145,7 +137,7 @@ class CrossingMerger:
         """Instance ``target`` was inserted from a view with points ``ego`` (n, 2) ego metres (a
         degenerate one counts as not seen whole, so that the first good complete view replaces
         it)."""
-        whole = is_complete(ego, self.rng) and _ring_area(ego) >= MIN_VIEW_AREA
+        whole = is_complete(ego, self.rng) and abs(signed_ring_area(ego)) >= MIN_VIEW_AREA
         self._counts[int(target)] = int(whole)
 
     def merge(
@@ -174,7 +166,7 @@ class CrossingMerger:
                 raise ValueError(f"crossing view ({name}) has NaN or inf points")
         if ego_pts.shape != pts.shape:
             raise ValueError(f"crossing view: world {pts.shape} and ego {ego_pts.shape} differ")
-        if _ring_area(pts) < MIN_VIEW_AREA:
+        if abs(signed_ring_area(pts)) < MIN_VIEW_AREA:
             return False  # a collapsed ring: no view of a crossing
         if is_complete(ego_pts, self.rng):
             new = pts if seen == 0 else average_rings(stored, pts, 1.0 / (seen + 1))
