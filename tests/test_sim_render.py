@@ -136,3 +136,24 @@ def test_sequences(world: WorldMap) -> None:
     assert all(int(s.name.split("-")[1]) in range(10_000, 10_100) for s in a)
     with pytest.raises(ValueError, match="split"):
         sim_sequences("dev", 1)
+
+
+def test_renderers_share_rays_and_build_their_arrays_lazily(world: WorldMap) -> None:
+    """Opening a drive casts no rays and draws no grain (a city of many drives at a large image
+    size would not fit in memory otherwise); renderers of one rig share its rays; a renderer whose
+    arrays were dropped (least recently used) renders the same images again."""
+    from icmapper.data.sim import renderer as mod
+
+    rig = nuscenes_rig(SIZE)
+    a, b = Renderer(world, rig, seed=3), Renderer(world, nuscenes_rig(SIZE), seed=4)
+    assert a._heavy is None and a._raster is None  # nothing of camera or world size yet
+    assert a._rays is b._rays  # one cast per rig geometry
+    assert Renderer(world, nuscenes_rig((32, 88)), seed=3)._rays is not a._rays
+    pose = xy_yaw_to_pose(*next(iter(world.lanes.values())).centerline[0], 0.3)
+    first = a.render(pose, frame_seed=7, t=1.0)
+    assert a._heavy is not None
+    others = [Renderer(world, rig, seed=10 + k) for k in range(mod._KEEP_RASTERS + 1)]
+    for r in others:
+        r.render(pose, frame_seed=1)
+    assert a._heavy is None and a._raster is None  # dropped, least recently used
+    np.testing.assert_array_equal(a.render(pose, frame_seed=7, t=1.0), first)

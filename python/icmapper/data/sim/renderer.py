@@ -1,10 +1,12 @@
 """Camera images of a WorldMap by ray-casting the ground plane onto a painted world raster.
 
 How it works (all vectorised numpy, no per-pixel Python):
-- Once per renderer: every camera pixel's ray is cast from its mount onto the ego's ground plane
-  (z = 0 in the ego frame; roll, pitch and height of the pose are ignored), giving a fixed ego-frame
-  hit point, depth and haze weight per pixel; rays above the horizon (or hitting beyond 250 m) see
-  sky / haze.
+- Once per rig (shared by the renderers of the same rig): every camera pixel's ray is cast from
+  its mount onto the ego's ground plane (z = 0 in the ego frame; roll, pitch and height of the pose
+  are ignored), giving a fixed ego-frame hit point, depth and haze weight per pixel; rays above the
+  horizon (or hitting beyond 250 m) see sky / haze. A renderer's own arrays of camera size (sensor
+  grain, sky colours) and its vehicles are drawn on its first frame, so opening many drives is
+  cheap.
 - Once per world, lazily on the first frame: the world is painted into a label raster (0.1 m per
   pixel): grass, sidewalk, kerb, asphalt, white and yellow paint. Drivable polygons are asphalt;
   boundaries are kerbs with a sidewalk band behind; dividers are painted by style (solid, dashed
@@ -68,6 +70,82 @@ class _Vehicles:
     speed: NDArray[np.float64]
 
 
+@dataclass
+class _Heavy:
+    """A renderer's arrays of camera size, built on its first frame (dropped with its raster)."""
+
+    grain: NDArray[np.float32]  # (2*C*3*H*W,) sensor noise drawn once, read at a random offset
+    vehicles: _Vehicles
+    sky: NDArray[np.float32]  # (C, H, W, 3) horizon-to-zenith colour per pixel
+
+
+@dataclass(frozen=True)
+class _RigRays:
+    """Every pixel's ray of a rig cast onto the ego's ground plane (shared by the renderers of
+    the same rig: every synthetic drive has the same one)."""
+
+    dir_planes: NDArray[np.float32]  # (C, 3, H, W) ray directions, ego frame
+    origins: NDArray[np.float64]  # (C, 3) camera centres, ego frame
+    depth: NDArray[np.float32]  # (C, H, W) ray parameter of the ground hit, inf off the ground
+    hit_full: NDArray[np.float32]  # (C, H, W, 2) ground hit, ego frame
+    ground_flat: NDArray[np.int64]  # (N,) pixels that see the ground, into C*H*W
+    hit: NDArray[np.float32]  # (N, 2) their ground hits
+    fog: NDArray[np.float32]  # (N, 1) haze weight with distance
+    sky_weight: NDArray[np.float64]  # (C, H, W, 1) zenith share of the sky colour
+
+
+_KEEP_RIGS = 4  # rigs whose rays are kept (least recently used dropped)
+_rays_cache: OrderedDict[bytes, _RigRays] = OrderedDict()
+
+
+def _rays_for(rig: CameraRig) -> _RigRays:
+    """The cast rays of ``rig``, from the cache when a rig of the same geometry was seen."""
+    key = (
+        np.asarray(rig.image_size, np.int64).tobytes()
+        + np.asarray(rig.intrinsics, np.float64).tobytes()
+        + np.asarray(rig.cam_to_ego, np.float64).tobytes()
+    )
+    rays = _rays_cache.get(key)
+    if rays is None:
+        rays = _cast_rays(rig)
+        _rays_cache[key] = rays
+        while len(_rays_cache) > _KEEP_RIGS:
+            _rays_cache.popitem(last=False)
+    _rays_cache.move_to_end(key)
+    return rays
+
+
+def _cast_rays(rig: CameraRig) -> _RigRays:
+    h, w = rig.image_size
+    u, v = np.meshgrid(np.arange(w) + 0.5, np.arange(h) + 0.5)  # (H, W) each
+    pix = np.stack([u, v, np.ones_like(u)], axis=-1)  # (H, W, 3)
+    k_inv = np.linalg.inv(rig.intrinsics)  # (C, 3, 3)
+    d_cam = np.einsum("cij,hwj->chwi", k_inv, pix)  # (C, H, W, 3)
+    d = np.einsum("cij,chwj->chwi", rig.cam_to_ego[:, :3, :3], d_cam)  # (C, H, W, 3) ego frame
+    o = rig.cam_to_ego[:, :3, 3]  # (C, 3)
+    if np.any(o[:, 2] <= 0):
+        raise ValueError("every camera must be mounted above the ground (cam_to_ego z > 0)")
+    dz = d[..., 2]  # (C, H, W)
+    down = dz < -1e-6
+    lam = np.where(down, -o[:, 2, None, None] / np.where(down, dz, -1.0), np.inf)  # (C, H, W)
+    dist = lam * np.linalg.norm(d, axis=-1)  # (C, H, W)
+    ground = dist < _MAX_DEPTH
+    hit = o[:, None, None, :2] + np.where(ground, lam, 0.0)[..., None] * d[..., :2]  # (C,H,W,2)
+    ground_flat = np.flatnonzero(ground)  # (N,) into C*H*W
+    fog = 1.0 - np.exp(-dist.reshape(-1)[ground_flat] / 160.0)  # (N,)
+    elev = dz / np.linalg.norm(d, axis=-1)  # (C, H, W) sine of elevation
+    return _RigRays(
+        dir_planes=np.ascontiguousarray(d.transpose(0, 3, 1, 2)).astype(np.float32),
+        origins=o,
+        depth=np.where(ground, lam, np.inf).astype(np.float32),
+        hit_full=hit.astype(np.float32),
+        ground_flat=ground_flat,
+        hit=hit.reshape(-1, 2)[ground_flat].astype(np.float32),
+        fog=fog.astype(np.float32)[:, None],
+        sky_weight=np.clip(elev * 3.0, 0.0, 1.0)[..., None],
+    )
+
+
 class Renderer:
     """Renders the cameras of `rig` in `world` (see the module docstring).
 
@@ -100,12 +178,14 @@ class Renderer:
         self.resolution, self.max_raster_pixels = float(resolution), int(max_raster_pixels)
         rng = np.random.default_rng([self.seed, 0x0E17])
         self._palette(rng)
-        self._cast_rays()
+        self._rays = _rays_for(rig)
         self._noise = _value_noise(rng, _NOISE)  # (N, N) float32 in about [-1, 1]
-        self._grain = rng.standard_normal(
-            2 * n_cam * 3 * rig.image_size[0] * rig.image_size[1]
-        ).astype(np.float32)
-        self._vehicles = _make_vehicles(world, rng) if vehicles else _no_vehicles()
+        # The grain, the vehicles and the sky are drawn on the first frame from this point of the
+        # renderer's random stream (opening thousands of drives stays cheap; see _ensure_heavy).
+        self._tail_state = rng.bit_generator.state
+        self._with_vehicles = bool(vehicles)
+        self._grain_seed: list[int] | None = None  # another rig's grain stream (with_rig)
+        self._heavy: _Heavy | None = None
         self._raster: _Raster | None = None
 
     def with_rig(self, rig: CameraRig) -> Renderer:
@@ -116,11 +196,9 @@ class Renderer:
             raise TypeError(f"rig must be a CameraRig, got {type(rig).__name__}")
         other = copy.copy(self)
         other.rig = rig
-        other._cast_rays()
-        n = 2 * rig.num_cameras * 3 * rig.image_size[0] * rig.image_size[1]
-        other._grain = (
-            np.random.default_rng([self.seed, 0x6A]).standard_normal(n).astype(np.float32)
-        )
+        other._rays = _rays_for(rig)
+        other._grain_seed = [self.seed, 0x6A]
+        other._heavy = None
         other._raster = self._ensure_raster()
         return other
 
@@ -148,57 +226,48 @@ class Renderer:
             [95, 140, 205], np.float32
         )
 
-    def _cast_rays(self) -> None:
-        rig = self.rig
-        h, w = rig.image_size
-        u, v = np.meshgrid(np.arange(w) + 0.5, np.arange(h) + 0.5)  # (H, W) each
-        pix = np.stack([u, v, np.ones_like(u)], axis=-1)  # (H, W, 3)
-        k_inv = np.linalg.inv(rig.intrinsics)  # (C, 3, 3)
-        d_cam = np.einsum("cij,hwj->chwi", k_inv, pix)  # (C, H, W, 3)
-        d = np.einsum("cij,chwj->chwi", rig.cam_to_ego[:, :3, :3], d_cam)  # (C, H, W, 3) ego frame
-        o = rig.cam_to_ego[:, :3, 3]  # (C, 3)
-        if np.any(o[:, 2] <= 0):
-            raise ValueError("every camera must be mounted above the ground (cam_to_ego z > 0)")
-        dz = d[..., 2]  # (C, H, W)
-        down = dz < -1e-6
-        lam = np.where(down, -o[:, 2, None, None] / np.where(down, dz, -1.0), np.inf)  # (C, H, W)
-        dist = lam * np.linalg.norm(d, axis=-1)  # (C, H, W)
-        ground = dist < _MAX_DEPTH
-        hit = (
-            o[:, None, None, :2] + np.where(ground, lam, 0.0)[..., None] * d[..., :2]
-        )  # (C, H, W, 2)
-        self._dir_planes = np.ascontiguousarray(d.transpose(0, 3, 1, 2)).astype(
-            np.float32
-        )  # (C, 3, H, W)
-        self._origins = o  # (C, 3)
-        self._depth = np.where(ground, lam, np.inf).astype(np.float32)  # (C, H, W) ray parameter
-        self._hit_full = hit.astype(np.float32)  # (C, H, W, 2) ego frame
-        self._ground_flat = np.flatnonzero(ground)  # (N,) into C*H*W
-        self._hit = hit.reshape(-1, 2)[self._ground_flat].astype(np.float32)  # (N, 2)
-        fog = 1.0 - np.exp(-dist.reshape(-1)[self._ground_flat] / 160.0)  # (N,)
-        self._fog = fog.astype(np.float32)[:, None]  # (N, 1)
-        elev = dz / np.linalg.norm(d, axis=-1)  # (C, H, W) sine of elevation
-        a = np.clip(elev * 3.0, 0.0, 1.0)[..., None]  # (C, H, W, 1)
-        self._background = ((1 - a) * self._horizon + a * self._zenith).astype(
-            np.float32
-        )  # (C, H, W, 3)
-
     # ----------------------------------------------------------------- raster
     def _ensure_raster(self) -> _Raster:
-        key = id(self)
         if self._raster is None:
             self._raster = _paint_world(
                 self.world, self.resolution, self.max_raster_pixels, self.seed
             )
-            _built[key] = weakref.ref(self)
-            while len(_built) > _KEEP_RASTERS:
-                _, ref = _built.popitem(last=False)
-                other = ref()
-                if other is not None and other is not self:
-                    other._raster = None
-        if key in _built:
-            _built.move_to_end(key)
+        self._touch()
         return self._raster
+
+    def _ensure_heavy(self) -> _Heavy:
+        """The grain, vehicles and sky of this renderer, drawn from its random stream where
+        ``__init__`` left it (the same arrays whenever they are rebuilt)."""
+        if self._heavy is None:
+            rng = np.random.default_rng()
+            rng.bit_generator.state = self._tail_state
+            h, w = self.rig.image_size
+            n = 2 * self.rig.num_cameras * 3 * h * w
+            grain = rng.standard_normal(n).astype(np.float32)  # (n,)
+            vehicles = _make_vehicles(self.world, rng) if self._with_vehicles else _no_vehicles()
+            if self._grain_seed is not None:
+                grain = np.random.default_rng(self._grain_seed).standard_normal(n)
+                grain = grain.astype(np.float32)
+            a = self._rays.sky_weight  # (C, H, W, 1)
+            sky = ((1 - a) * self._horizon + a * self._zenith).astype(np.float32)  # (C, H, W, 3)
+            self._heavy = _Heavy(grain, vehicles, sky)
+        self._touch()
+        return self._heavy
+
+    def _touch(self) -> None:
+        """Marks this renderer as used: the raster and per-renderer arrays of the renderers least
+        recently used beyond ``_KEEP_RASTERS`` are dropped (rebuilt on demand)."""
+        key = id(self)
+        if key in _built and _built[key]() is self:
+            _built.move_to_end(key)
+            return
+        _built[key] = weakref.ref(self)
+        while len(_built) > _KEEP_RASTERS:
+            _, ref = _built.popitem(last=False)
+            other = ref()
+            if other is not None and other is not self:
+                other._raster = None
+                other._heavy = None
 
     # ----------------------------------------------------------------- render
     def render(
@@ -214,14 +283,15 @@ class Renderer:
         if not np.isfinite(t):
             raise ValueError(f"t must be finite, got {t}")
         r = self._ensure_raster()
+        heavy, rays = self._ensure_heavy(), self._rays
         rig = self.rig
         c, (h, w) = rig.num_cameras, rig.image_size
-        img = self._background.copy().reshape(-1, 3)  # (C*H*W, 3)
+        img = heavy.sky.copy().reshape(-1, 3)  # (C*H*W, 3)
 
         # Ground: move the fixed ego-frame hits into the raster, gather labels, colour.
         cy, sy = np.float32(np.cos(yaw)), np.float32(np.sin(yaw))
         inv = np.float32(1.0 / r.res)
-        hx, hy = self._hit[:, 0], self._hit[:, 1]  # (N,)
+        hx, hy = rays.hit[:, 0], rays.hit[:, 1]  # (N,)
         # +0.5: the painter puts coordinate k at the centre of raster pixel k (nearest pixel).
         col_f = (cy * hx - sy * hy + np.float32(x - r.x0 + 0.5 * r.res)) * inv  # (N,) raster column
         row_f = (sy * hx + cy * hy + np.float32(y - r.y0 + 0.5 * r.res)) * inv  # (N,) raster row
@@ -236,8 +306,8 @@ class Renderer:
         tex = self._noise[iy & (_NOISE - 1), ix & (_NOISE - 1)]  # (N,)
         shade = 1.0 + self._amp[lab] * tex  # (N,)
         col = self._lut[lab] * shade[:, None]  # (N, 3)
-        col += self._fog * (self._horizon - col)  # haze with distance
-        img[self._ground_flat] = col
+        col += rays.fog * (self._horizon - col)  # haze with distance
+        img[rays.ground_flat] = col
         img = img.reshape(c, h, w, 3)
 
         self._draw_vehicles(img, x, y, yaw, t)
@@ -256,8 +326,8 @@ class Renderer:
         b = np.float32(rng.uniform(0.0, 0.4))
         img[:, 1:-1] = (1 - b) * img[:, 1:-1] + (b / 2) * (img[:, :-2] + img[:, 2:])
         n = img.size
-        off = int(rng.integers(0, self._grain.size - n))
-        img += np.float32(rng.uniform(1.5, 5.0)) * self._grain[off : off + n].reshape(img.shape)
+        off = int(rng.integers(0, heavy.grain.size - n))
+        img += np.float32(rng.uniform(1.5, 5.0)) * heavy.grain[off : off + n].reshape(img.shape)
         out = np.clip(img, 0.0, 255.0).astype(np.uint8)  # (C, H, W, 3)
         return np.ascontiguousarray(out.transpose(0, 3, 1, 2))  # (C, 3, H, W)
 
@@ -265,7 +335,7 @@ class Renderer:
         self, img: NDArray[np.float32], x: float, y: float, yaw: float, t: float
     ) -> None:
         """Ray/box intersection of nearby vehicles into img (C, H, W, 3) in place, with shadows."""
-        veh = self._vehicles
+        veh = self._ensure_heavy().vehicles
         if veh.centre.shape[0] == 0:
             return
         centre, vyaw = veh.centre.copy(), veh.yaw.copy()
@@ -338,10 +408,10 @@ class Renderer:
         ln, wd, ht = (float(v) for v in size)
         c, s = np.float32(rot[0, 0]), np.float32(rot[1, 0])
         # Shadow on the ground hits inside the (slightly enlarged) footprint.
-        hit = self._hit_full[ci, v0:v1, u0:u1]  # (h, w, 2) ego frame
+        hit = self._rays.hit_full[ci, v0:v1, u0:u1]  # (h, w, 2) ego frame
         gx0 = hit[..., 0] - np.float32(centre[0])
         gy0 = hit[..., 1] - np.float32(centre[1])
-        depth = self._depth[ci, v0:v1, u0:u1]  # (h, w), inf off the ground
+        depth = self._rays.depth[ci, v0:v1, u0:u1]  # (h, w), inf off the ground
         shadow = (np.abs(c * gx0 + s * gy0) < ln / 2 + 0.25) & (
             np.abs(-s * gx0 + c * gy0) < wd / 2 + 0.25
         )
@@ -349,13 +419,13 @@ class Renderer:
         tile[shadow] *= 0.45
         # Body: slab test in the box frame (rays rotated by rot^T).
         dxe, dye, dz = (
-            self._dir_planes[ci, 0, v0:v1, u0:u1],
-            self._dir_planes[ci, 1, v0:v1, u0:u1],
-            self._dir_planes[ci, 2, v0:v1, u0:u1],
+            self._rays.dir_planes[ci, 0, v0:v1, u0:u1],
+            self._rays.dir_planes[ci, 1, v0:v1, u0:u1],
+            self._rays.dir_planes[ci, 2, v0:v1, u0:u1],
         )
         dx = c * dxe + s * dye  # (h, w)
         dy = -s * dxe + c * dye
-        o = (self._origins[ci] - np.array([centre[0], centre[1], 0.0])) @ rot  # (3,) box frame
+        o = (self._rays.origins[ci] - np.array([centre[0], centre[1], 0.0])) @ rot  # (3,) box frame
         with np.errstate(divide="ignore", invalid="ignore"):
             tx1, tx2 = (-ln / 2 - o[0]) / dx, (ln / 2 - o[0]) / dx
             ty1, ty2 = (-wd / 2 - o[1]) / dy, (wd / 2 - o[1]) / dy
