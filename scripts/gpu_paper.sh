@@ -8,7 +8,12 @@
 #   bash scripts/gpu_paper.sh start MINUTES   # smoke test (30 steps, one drive mapped), then the
 #                                             # run in the background, its steps sized to MINUTES
 #   bash scripts/gpu_paper.sh wait SECONDS    # follow it for up to SECONDS (ends when it ends)
+#   bash scripts/gpu_paper.sh more STEPS      # resume the run up to STEPS in all (the cosine
+#                                             # schedule then spans STEPS)
 #   bash scripts/gpu_paper.sh finish          # map 4 test drives, export the weights (bf16, split)
+#
+# The run reported in python/icmapper/checkpoints/README.md: start 13, wait 540, wait 120, finish
+# (500 steps), more 700, finish (700 steps).
 #
 # On any other machine with a GPU and icmapper installed, the same training is one command:
 #   icmapper train --config configs/paper.toml --stage 1 --out runs/paper \
@@ -64,8 +69,13 @@ wait)
     progress; tail -n 3 "$RUN/train.log"
     cp "$RUN/stage1_metrics.csv" "$RUN/train.log" "$OUT/"
     ;;
+more)
+    train "$RUN" "${2:?steps}" --resume > "$RUN/more.log" 2>&1
+    tail -n 3 "$RUN/more.log"; progress
+    ;;
 finish)
     pkill -f "icmapper train" && sleep 5  # a run past its time stops at its last checkpoint
+    rm -rf "$RUN/eval"
     cp "$RUN/stage1_metrics.csv" "$OUT/"  # (8 files at most come back)
     icm compare --source sim:test:4 --methods icmapper-base,post-track \
         --checkpoint "$RUN/stage1.pt" --device cuda --out "$RUN/eval" --no-progress \

@@ -29,6 +29,9 @@ def test_config_from_dict_checks_names_types_and_ranges() -> None:
         MapperConfig.from_dict({"min_hits": 2.5})
     with pytest.raises(ValueError, match="assoc_threshold must be in"):
         MapperConfig.from_dict({"assoc_threshold": 1.5})
+    for bad in (0.0, 1.5, float("nan")):
+        with pytest.raises(ValueError, match="reid_overlap must be in"):
+            MapperConfig.from_dict({"reid_overlap": bad})
     for bad in (0.0, -1.0):
         with pytest.raises(ValueError, match="city_tolerance must be > 0"):
             MapperConfig.from_dict({"city_tolerance": bad})

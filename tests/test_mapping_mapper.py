@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 from icmapper.data.gt import global_gt, sequence_gt
 from icmapper.data.sources import open_source
-from icmapper.data.types import Frame, FrameGT, RANGE_60x30, Sequence
+from icmapper.data.types import Frame, FrameGT, MapClass, RANGE_60x30, Sequence
 from icmapper.eval.globalmap import dense_sample, map_cd
 from icmapper.mapping.config import MapperConfig
 from icmapper.mapping.mapper import Mapper
@@ -561,3 +561,20 @@ def test_fused_polylines_merge_by_rule(
         MapperConfig(fused_merge="glue")
     with pytest.raises(ValueError, match="splice_overlap"):
         MapperConfig(splice_overlap=0.0)
+
+
+@pytest.mark.parametrize("min_overlap, renamed", [(0.5, True), (0.6, True), (0.7, False)])
+def test_reidentify_needs_the_overlap_share(min_overlap: float, renamed: bool) -> None:
+    """A new divider 60 % of whose points lie on a stored one (the rest 3 m to its side) takes its
+    id where ``reid_overlap`` asks for at most 60 %, and stays new where it asks for more."""
+    from icmapper.mapping.reid import reidentify
+
+    xs = np.linspace(0.0, 19.0, 20)
+    stored = np.stack([xs, np.zeros(20)], -1)[None].astype(np.float32)  # (1, 20, 2)
+    det = np.stack([xs, np.where(np.arange(20) < 12, 0.2, 3.0)], -1)[None].astype(np.float32)
+    decision = reidentify(
+        np.array([MapClass.DIVIDER]), det, np.array([7]), np.array([True]),
+        {3: 0}, np.array([MapClass.DIVIDER]), stored, 1.0, min_overlap,
+    )  # fmt: skip
+    assert decision.renamed == ({7: 3} if renamed else {})
+    assert decision.aliased == {}

@@ -45,6 +45,9 @@ class MapperConfig:
     assoc_threshold: float = _f(0.5, "θ: minimum association score of a match")
     min_hits: int = _f(2, "frames a new track must be seen before it enters the global map")
     reid_distance: float = _f(1.0, "metres; re-identification against the map (0: off)")
+    reid_overlap: float = _f(
+        0.5, "share of a new track's points within reid_distance of an instance to take its id"
+    )
     reid_alias: bool = _f(
         True,
         "re-identification maps a second new piece of an instance matched this frame into it "
@@ -113,6 +116,10 @@ class MapperConfig:
         if not 0.0 < self.city_min_overlap <= 1.0:
             raise ValueError(
                 f"MapperConfig.city_min_overlap must be in (0, 1], got {self.city_min_overlap}"
+            )
+        if not 0.0 < self.reid_overlap <= 1.0:
+            raise ValueError(
+                f"MapperConfig.reid_overlap must be in (0, 1], got {self.reid_overlap}"
             )
         if not 0.0 < self.polymerge_min_overlap <= 1.0:
             raise ValueError(

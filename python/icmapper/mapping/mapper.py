@@ -385,6 +385,7 @@ class Mapper:
             hist_cls,
             hist_pts,
             self.config.reid_distance,
+            self.config.reid_overlap,
         )
         ids = track_ids.copy()
         for j, tid in enumerate(track_ids.tolist()):

@@ -1,5 +1,5 @@
 """Re-identification of new tracks against the global map (an extension of IC-Mapper, documented
-in docs/mapping.md): a new track at least ``REID_MIN_OVERLAP`` of whose points lie within
+in docs/mapping.md): a new track at least ``reid_overlap`` of whose points lie within
 ``reid_distance`` of a same-class global instance takes that instance's id, so that a lost and
 re-found track does not duplicate the map. Pure geometry on the sampled history; no state.
 """
@@ -12,10 +12,6 @@ import numpy as np
 from numpy.typing import NDArray
 
 from icmapper.geom import point_to_segments, polyline_segments
-
-#: Share of a new track's points that must lie within ``reid_distance`` of a global instance for
-#: the track to take that instance's id.
-REID_MIN_OVERLAP = 0.5
 
 
 @dataclass
@@ -37,12 +33,14 @@ def reidentify(
     hist_cls: NDArray[np.int64],
     hist_pts: NDArray[np.float32],
     limit: float,
+    min_overlap: float,
 ) -> ReidDecision:
     """Decides which new tracks lie on a same-class global instance of the sampled history.
 
     det_classes (k,), det_points (k, P, 2) ego metres, track_ids (k,) the tracker's ids,
     is_new (k,) True where the track is neither in the map nor aliased yet; hist_row: global id
-    -> row of the sampled history (hist_cls (h,), hist_pts (h, S, 2) ego metres); limit: metres.
+    -> row of the sampled history (hist_cls (h,), hist_pts (h, S, 2) ego metres); limit: metres;
+    min_overlap: the share of a track's points that must lie within ``limit`` of the instance.
     """
     out = ReidDecision()
     if limit <= 0 or not hist_row:
@@ -63,7 +61,7 @@ def reidentify(
         # grew at the range edge still overlaps it over most of its length
         overlap = (dist <= limit).mean(axis=1)  # (c,)
         best = int(np.argmax(overlap - 1e-3 * dist.mean(axis=1)))
-        if overlap[best] < REID_MIN_OVERLAP:
+        if overlap[best] < min_overlap:
             continue
         gid = cands[best][0]
         if gid in taken:
