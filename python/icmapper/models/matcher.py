@@ -8,6 +8,7 @@ index pairs and the chosen order of each matched GT.
 
 from __future__ import annotations
 
+import numpy as np
 import torch
 from scipy.optimize import linear_sum_assignment
 from torch import nn
@@ -101,9 +102,10 @@ class HungarianMatcher(nn.Module):
             empty = torch.zeros(0, dtype=torch.int64, device=dev)
             return empty, empty, empty
         cost, best = self.cost_matrix(logits, points, gt_classes, gt_points)
-        if not torch.isfinite(cost).all():
+        cost_np = cost.cpu().numpy()  # (Q, G); checked here: one device sync, not two
+        if not np.isfinite(cost_np).all():
             raise ValueError("matching cost contains NaN or inf (NaN predictions or targets?)")
-        rows, cols = linear_sum_assignment(cost.cpu().numpy())
+        rows, cols = linear_sum_assignment(cost_np)
         pred_idx = torch.as_tensor(rows, dtype=torch.int64, device=dev)
         gt_idx = torch.as_tensor(cols, dtype=torch.int64, device=dev)
         return pred_idx, gt_idx, best[pred_idx, gt_idx]
