@@ -195,10 +195,10 @@ def fusion_gain(
     from icmapper.data.gt import sequence_gt
     from icmapper.data.sources import open_source
     from icmapper.mapping.mapper import Mapper
-    from icmapper.models.network import load_network
+    from icmapper.models.network import checkpoint_settings
 
     mapper = Mapper.from_checkpoint(checkpoint, variant=variant)
-    size = load_network(checkpoint).image_size
+    size = checkpoint_settings(checkpoint)[1]  # the image size, without building a second network
     errors: dict[int, list[tuple[float, float]]] = {k: [] for k in range(len(CLASS_NAMES))}
     for seq in open_source(spec, image_size=size):
         mapper.reset()
