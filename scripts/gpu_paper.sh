@@ -19,6 +19,13 @@
 #   icmapper train --config configs/paper.toml --stage 1 --out runs/paper \
 #       --set 'data.source="sim:train:128 + sim-varied:train:128"' --set stage1.steps=N
 set -uo pipefail
+case ${1:-} in
+start | wait | more | finish) ;;
+*)
+    echo "usage: $0 start MINUTES | wait SECONDS | more STEPS | finish" >&2
+    exit 2
+    ;;
+esac
 RUN=/tmp/paper
 SOURCE='"sim:train:128 + sim-varied:train:128"'   # the small config's 256 drives
 OUT=${OUT:-/tmp/paper-out}
@@ -97,9 +104,5 @@ for i in range(0, len(data), part):
 import os; os.remove(path)
 print("weights", len(data), "bytes in", -(-len(data) // part), "parts")
 EOF
-    ;;
-*)
-    echo "usage: $0 start MINUTES | wait SECONDS | finish" >&2
-    exit 2
     ;;
 esac
