@@ -19,19 +19,20 @@ from icmapper.data.sim.city import generate_city
 from icmapper.data.sim.driver import drive
 from icmapper.data.sim.renderer import Renderer
 from icmapper.data.sim.rig import nuscenes_rig
+from icmapper.data.types import WorldMap
 
 SIZES = ((128, 352), (256, 704))
 OPEN_SIZE = (480, 800)  # configs/paper.toml
 
 
-def open_drives(world: object, n: int, eager: bool) -> float:
+def open_drives(world: WorldMap, n: int, eager: bool) -> float:
     """Seconds to make ``n`` renderers of ``world`` at OPEN_SIZE; ``eager`` adds what the former
     constructor did for each: cast every pixel's ray and draw the sensor grain."""
     renderer_module._rays_cache.clear()
     rig = nuscenes_rig(OPEN_SIZE)
     t0 = time.perf_counter()
     for k in range(n):
-        Renderer(world, rig, seed=k)  # type: ignore[arg-type]
+        Renderer(world, rig, seed=k)
         if eager:
             renderer_module._cast_rays(rig)
             size = 2 * rig.num_cameras * 3 * OPEN_SIZE[0] * OPEN_SIZE[1]

@@ -243,6 +243,7 @@ class Renderer:
             rng.bit_generator.state = self._tail_state
             h, w = self.rig.image_size
             n = 2 * self.rig.num_cameras * 3 * h * w
+            # drawn even for a with_rig copy: the vehicles come after it in the stream
             grain = rng.standard_normal(n).astype(np.float32)  # (n,)
             vehicles = _make_vehicles(self.world, rng) if self._with_vehicles else _no_vehicles()
             if self._grain_seed is not None:
@@ -310,7 +311,7 @@ class Renderer:
         img[rays.ground_flat] = col
         img = img.reshape(c, h, w, 3)
 
-        self._draw_vehicles(img, x, y, yaw, t)
+        self._draw_vehicles(img, heavy.vehicles, x, y, yaw, t)
 
         # Camera effects: exposure / white balance, blur, sensor noise.
         rng = np.random.default_rng(
@@ -332,10 +333,15 @@ class Renderer:
         return np.ascontiguousarray(out.transpose(0, 3, 1, 2))  # (C, 3, H, W)
 
     def _draw_vehicles(
-        self, img: NDArray[np.float32], x: float, y: float, yaw: float, t: float
+        self,
+        img: NDArray[np.float32],
+        veh: _Vehicles,
+        x: float,
+        y: float,
+        yaw: float,
+        t: float,
     ) -> None:
         """Ray/box intersection of nearby vehicles into img (C, H, W, 3) in place, with shadows."""
-        veh = self._ensure_heavy().vehicles
         if veh.centre.shape[0] == 0:
             return
         centre, vyaw = veh.centre.copy(), veh.yaw.copy()
