@@ -82,8 +82,9 @@ def merge_polyline(
     """Merges a detected polyline into a global one (IC-Mapper Algorithm 2), both world frame.
 
     global_pts: (m, 2), detected_pts: (d, 2). The detection's orientation is decided from the
-    geometry; the merged points are fitted (``fit_curve`` with ``s``) and resampled about
-    ``spacing`` apart. The result keeps the global direction: (k, 2) float64. ``s`` and
+    geometry; the detection and the global points within 5 m of it (by arc length) are fitted
+    (``fit_curve`` with ``s``) and resampled about ``spacing`` apart; the global points beyond
+    are kept as they are. The result keeps the global direction: (k, 2) float64. ``s`` and
     ``spacing`` as for ``fit_curve``.
     """
 

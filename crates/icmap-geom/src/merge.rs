@@ -4,9 +4,10 @@
 //! (arc length `s`, extended beyond the ends along the end segments), oriented so that its `s`
 //! grows, and spliced in: the global points outside the detection's `s`-interval (with a margin
 //! of half a spacing, to avoid near-duplicate points across the junction) before it, the detection,
-//! the global points after it. The spliced list is fitted with the smoothing spline of
-//! [`crate::fit::fit_curve`]. Crossings: polygon union, or the convex hull when the union falls
-//! apart.
+//! the global points after it. The detection, with [`FIT_CONTEXT`] metres of the global points on
+//! either side of it, is fitted with the smoothing spline of [`crate::fit::fit_curve`]; the global
+//! points farther away are kept as they are, so a merge changes an instance only near the
+//! detection. Crossings: polygon union, or the convex hull when the union falls apart.
 
 use crate::error::{GeomError, Result};
 use crate::fit::fit_curve;
@@ -27,6 +28,12 @@ use nalgebra::Vector2;
 
 /// Consecutive points closer than this (metres) are merged before merging.
 const DEDUP_EPS: f64 = 1e-9;
+
+/// Metres of the global polyline on each side of the detection that a merge fits again with it;
+/// the global points beyond are kept as they are. Fitting the whole instance at every merge would
+/// smooth its far parts again and again (each fit moves a point by up to its residual), so a
+/// long instance would drift off its line and cut its corners.
+pub const FIT_CONTEXT: f64 = 5.0;
 
 /// Projection of points onto the polyline `g` (cumulative lengths `cum`, total length > 0): the
 /// arc length of the nearest point, extended linearly beyond the ends along the end segments
@@ -241,8 +248,9 @@ impl<'a> Projector<'a> {
 /// Merges a detected polyline into a global polyline (both world frame): decides the orientation of
 /// the detection from the geometry, reorders and concatenates (cases: partial overlap, one
 /// containing the other, end-to-end continuation, reversed direction), fits a smoothing spline with
-/// parameter `s` ([`crate::fit::fit_curve`]) and resamples about `spacing` apart. The result keeps the
-/// global instance's direction.
+/// parameter `s` ([`crate::fit::fit_curve`]) to the detection and the global points within
+/// [`FIT_CONTEXT`] of it, resampled about `spacing` apart, and keeps the global points beyond as
+/// they are. The result keeps the global instance's direction.
 ///
 /// Orientation: the detection is reversed when its segments run against the global tangents at
 /// the projections of their ends (length-weighted dot products; ties broken by the projected end
@@ -307,21 +315,40 @@ pub fn merge_polyline(
     let s_lo = sd.iter().cloned().fold(f64::INFINITY, f64::min);
     let s_hi = sd.iter().cloned().fold(f64::NEG_INFINITY, f64::max);
     let margin = 0.5 * spacing;
-    let mut combined: Vec<Point> = Vec::with_capacity(g.len() + d.len());
-    combined.extend(
+    // Global points by arc length: kept as they are | refitted with the detection | replaced by
+    // it | refitted | kept.
+    let (lo, hi) = (s_lo - margin, s_hi + margin);
+    let stored = |keep: &dyn Fn(f64) -> bool| -> Vec<Point> {
         g.iter()
             .zip(&gcum)
-            .filter(|(_, &c)| c < s_lo - margin)
-            .map(|(p, _)| *p),
-    );
-    combined.extend_from_slice(&d);
-    combined.extend(
-        g.iter()
-            .zip(&gcum)
-            .filter(|(_, &c)| c > s_hi + margin)
-            .map(|(p, _)| *p),
-    );
-    fit_or_polyline(&combined, s, spacing)
+            .filter(|(_, &c)| keep(c))
+            .map(|(p, _)| *p)
+            .collect()
+    };
+    let mut window = stored(&|c| c < lo && c >= lo - FIT_CONTEXT);
+    window.extend_from_slice(&d);
+    window.extend(stored(&|c| c > hi && c <= hi + FIT_CONTEXT));
+    let mut before = stored(&|c| c < lo - FIT_CONTEXT);
+    let mut after = stored(&|c| c > hi + FIT_CONTEXT);
+    let fitted = fit_or_polyline(&window, s, spacing)?;
+    if before.is_empty() && after.is_empty() {
+        return Ok(fitted);
+    }
+    // The fit joined to the kept points on either side (which stay exactly where they are) and
+    // resampled at `spacing` from one to the other, so the junctions are no wider than `spacing`.
+    let mut joined: Vec<Point> = Vec::with_capacity(fitted.len() + 2);
+    joined.extend(before.pop());
+    joined.extend_from_slice(&fitted);
+    if !after.is_empty() {
+        joined.push(after.remove(0));
+    }
+    before.extend(resample_spacing(
+        &dedup_cow(&joined, DEDUP_EPS, false),
+        spacing,
+        false,
+    )?);
+    before.extend(after);
+    Ok(before)
 }
 
 /// Convex hull (Andrew's monotone chain), counter-clockwise, without collinear points.
@@ -454,6 +481,61 @@ mod tests {
             p(0.0, 0.0),
             0.3,
         );
+    }
+
+    /// An L-shaped instance: 60 m along x, a quarter circle of radius 10 m, 60 m along y, at
+    /// 1 m spacing.
+    fn corner() -> Vec<Point> {
+        let mut g: Vec<Point> = (0..=60).map(|i| p(i as f64 - 60.0, 0.0)).collect();
+        let arc = std::f64::consts::FRAC_PI_2 * 10.0;
+        let n = arc.ceil() as usize;
+        for i in 1..=n {
+            let t = std::f64::consts::FRAC_PI_2 * i as f64 / n as f64;
+            g.push(p(10.0 * t.sin(), 10.0 - 10.0 * t.cos()));
+        }
+        g.extend((1..=60).map(|i| p(10.0, 10.0 + i as f64)));
+        g
+    }
+
+    #[test]
+    fn merge_keeps_points_beyond_the_fit_context() {
+        let g = corner();
+        // A detection near the far end of the y leg, 0.2 m off the line.
+        let d: Vec<Point> = (0..=10).map(|i| p(10.2, 60.0 + i as f64)).collect();
+        let out = merge_polyline(&g, &d, 0.5, 1.0).unwrap();
+        // Every global point more than FIT_CONTEXT (+ half a spacing) before the detection is
+        // kept exactly; the new part follows the detection; no gap wider than the spacing.
+        let kept = g
+            .iter()
+            .take_while(|q| q.y < 60.0 - FIT_CONTEXT - 0.5)
+            .count();
+        assert_eq!(&out[..kept], &g[..kept]);
+        assert!((out[out.len() - 1] - p(10.2, 70.0)).norm() < 0.2);
+        assert!(out.windows(2).all(|w| (w[1] - w[0]).norm() <= 1.0 + 1e-9));
+    }
+
+    #[test]
+    fn repeated_merges_do_not_cut_the_corner() {
+        // A car driving up the y leg: 40 merges of noisy 20 m views, each at the leg's end. The
+        // corner, far behind, stays where it was (the whole instance refitted at every merge
+        // moved it by more than 0.1 m).
+        let mut g = corner();
+        for k in 0..40 {
+            let y0 = 40.0 + k as f64;
+            // deterministic noise of +-0.1 m
+            let noise = |i: usize| 0.1 * (((k * 31 + i * 17) % 7) as f64 - 3.0) / 3.0;
+            let d: Vec<Point> = (0..=20)
+                .map(|i| p(10.0 + noise(i), y0 + i as f64))
+                .collect();
+            g = merge_polyline(&g, &d, 0.5, 1.0).unwrap();
+        }
+        let h = std::f64::consts::FRAC_1_SQRT_2;
+        let mid = p(10.0 * h, 10.0 - 10.0 * h); // the arc's middle
+        let nearest = g
+            .iter()
+            .map(|q| (q - mid).norm())
+            .fold(f64::INFINITY, f64::min);
+        assert!(nearest < 0.05, "the corner moved by {nearest}");
     }
 
     #[test]
