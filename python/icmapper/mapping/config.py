@@ -36,6 +36,12 @@ class MapperConfig:
         "how an observed crossing merges into its instance: 'average' (complete views: running "
         "mean of the rings; views cut by the range edge: union) or 'union' (mapping.crossings)",
     )
+    merge_behind: float = _f(
+        5.0,
+        "metres behind the ego beyond which a polyline observation leaves the stretch the "
+        "instance already covers as it is: the car has passed it, the map holds a nearer view "
+        "(mapping.passed; 0: the newest view replaces everything it overlaps)",
+    )
     positional_scale: float = _f(
         1.0, "metres; positional affinity exp(-chamfer/scale) (no query features, Post-Track)"
     )
@@ -101,7 +107,7 @@ class MapperConfig:
         for name in ("min_hits", "cluster_min_samples"):
             if getattr(self, name) < 1:
                 raise ValueError(f"MapperConfig.{name} must be >= 1, got {getattr(self, name)}")
-        for name in ("max_age", "reid_distance", "fusion_margin", "smoothing"):
+        for name in ("max_age", "reid_distance", "fusion_margin", "smoothing", "merge_behind"):
             if not getattr(self, name) >= 0:
                 raise ValueError(f"MapperConfig.{name} must be >= 0, got {getattr(self, name)}")
         if self.fused_merge not in FUSED_MERGES:

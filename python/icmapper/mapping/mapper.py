@@ -46,6 +46,7 @@ from icmapper.data.types import (
 from icmapper.mapping.config import MapperConfig
 from icmapper.mapping.crossings import CrossingMerger
 from icmapper.mapping.network_source import NetworkDetector
+from icmapper.mapping.passed import fresh_runs
 from icmapper.mapping.reid import reidentify
 from icmapper.mapping.splice import splice_into
 from icmapper.mapping.tracker import Tracker, positional_affinity
@@ -449,19 +450,16 @@ class Mapper:
         # Inserts and crossing merges now (a later detection of this frame may merge into a new
         # instance), polyline merges collected and run in one parallel merge_many call: the same
         # map as merging in order.
-        merge_items: list[tuple[int, int, NDArray[np.float64]]] = []  # (track, target, world)
+        # (track, target, world, the runs of world that merge: mapping.passed)
+        merge_items: list[tuple[int, int, NDArray[np.float64], list[NDArray[np.float64]]]] = []
         for j, tid in enumerate(track_ids.tolist()):
             world = ego_to_world(fused[j], pose)  # (P, 2)
             target = self._alias.get(tid, tid)  # the global instance this track maps into
             crossing = int(det.classes[j]) == MapClass.PED_CROSSING
             spliced = bool(was_fused[j]) and self.config.fused_merge == "splice"
-            if target in self._map and (crossing or spliced):
+            if target in self._map and crossing:  # by the crossing rule (mapping.crossings)
                 try:
-                    if crossing:  # by the crossing rule (mapping.crossings)
-                        self.crossings.merge(self._map, target, world, fused[j], frame_index)
-                    else:  # the fusion already combined it with the history (mapping.splice)
-                        cfg = self.config
-                        splice_into(self._map, target, world, cfg.splice_overlap, frame_index)
+                    self.crossings.merge(self._map, target, world, fused[j], frame_index)
                 except ValueError as exc:
                     self._note_failure(frame_index, target, exc)
                     continue
@@ -469,7 +467,20 @@ class Mapper:
                 self.tracker.set_points(tid, world)
                 continue
             if target in self._map:
-                merge_items.append((tid, target, world))
+                # not the stretch the car has passed (mapping.passed); the tracker keeps it all
+                stored = self._map.get(target)[1]
+                runs = fresh_runs(fused[j], world, stored, self.config.merge_behind)
+                if not spliced:
+                    merge_items.append((tid, target, world, runs))
+                    continue
+                try:  # the fusion already combined it with the history (mapping.splice)
+                    for run in runs:
+                        splice_into(self._map, target, run, self.config.splice_overlap, frame_index)
+                except ValueError as exc:
+                    self._note_failure(frame_index, target, exc)
+                    continue
+                merged.append(target)
+                self.tracker.set_points(tid, world)
                 continue
             if self.tracker.track(tid).hits < self.config.min_hits:
                 continue  # tentative track: not in the map until confirmed
@@ -482,13 +493,14 @@ class Mapper:
                 self.crossings.inserted(tid, fused[j])
             inserted.append(tid)
             self.tracker.set_points(tid, world)
-        if merge_items:
-            errors = self._map.merge_many(
-                [t for _, t, _ in merge_items], [w for _, _, w in merge_items], frame=frame_index
-            )
-            for (tid, target, world), exc in zip(merge_items, errors, strict=True):
-                if exc is not None:
-                    self._note_failure(frame_index, target, exc)
+        if merge_items:  # one item per run, the runs of a track in order
+            flat = [(target, run) for _, target, _, runs in merge_items for run in runs]
+            ids, runs_ = [t for t, _ in flat], [r for _, r in flat]
+            errors = iter(self._map.merge_many(ids, runs_, frame=frame_index) if flat else ())
+            for tid, target, world, runs in merge_items:
+                failed = [exc for exc in (next(errors) for _ in runs) if exc is not None]
+                if failed:
+                    self._note_failure(frame_index, target, failed[0])
                     continue
                 merged.append(target)
                 self.tracker.set_points(tid, world)

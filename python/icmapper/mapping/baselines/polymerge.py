@@ -25,6 +25,7 @@ from icmapper.mapping.baselines.common import new_global_map, read_frame
 from icmapper.mapping.config import MapperConfig
 from icmapper.mapping.crossings import CrossingMerger
 from icmapper.mapping.methods import MethodInfo, register_method
+from icmapper.mapping.passed import fresh_runs
 from icmapper.mapping.splice import overlap_fraction, splice_polyline
 from icmapper.mapping.types import DetectionSource, StepResult
 
@@ -93,7 +94,10 @@ class PolyMerge:
                     self.crossings.merge(self.map, best, world, dets.points[i], frame.index)
                 else:
                     _, stored = self.map.get(best)
-                    new = splice_polyline(np.asarray(stored, np.float64), world, self.buffer)
+                    new = np.asarray(stored, np.float64)
+                    ego = dets.points[i]  # not the stretch the car has passed (mapping.passed)
+                    for run in fresh_runs(ego, world, new, self.config.merge_behind):
+                        new = splice_polyline(new, run, self.buffer)
                     self.map.replace(best, new, frame.index)
                 merged.append(best)
             ids[i] = best

@@ -23,6 +23,7 @@ from icmapper.mapping.baselines.common import new_global_map, read_frame
 from icmapper.mapping.config import MapperConfig
 from icmapper.mapping.crossings import CrossingMerger
 from icmapper.mapping.methods import MethodInfo, register_method
+from icmapper.mapping.passed import fresh_runs
 from icmapper.mapping.tracker import Tracker, positional_affinity
 from icmapper.mapping.types import DetectionSource, StepResult
 
@@ -92,8 +93,10 @@ class PostTrack:
         if tid in self.map:
             if MapClass(cls).closed:
                 self.crossings.merge(self.map, tid, world, ego, frame)
-            else:
-                self.map.merge(tid, world, frame)
+            else:  # not the stretch the car has passed (mapping.passed)
+                stored = self.map.get(tid)[1]
+                for run in fresh_runs(ego, world, stored, self.config.merge_behind):
+                    self.map.merge(tid, run, frame)
             return True
         self.map.insert_with_id(tid, cls, world, frame)
         if MapClass(cls).closed:

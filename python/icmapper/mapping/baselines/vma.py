@@ -20,6 +20,7 @@ from scipy.spatial import ConvexHull, QhullError
 from icmapper.data.types import MapClass
 from icmapper.mapping.baselines.post_track import PostTrack
 from icmapper.mapping.methods import MethodInfo, register_method
+from icmapper.mapping.passed import fresh_runs
 from icmapper.mapping.splice import inside_ring, ring_distance, splice_polyline
 
 if TYPE_CHECKING:
@@ -44,8 +45,10 @@ class VmaMerge(PostTrack):
         _, stored = self.map.get(tid)
         if MapClass(cls).closed:
             new = splice_ring(np.asarray(stored, np.float64), world, self.config.vma_overlap)
-        else:
-            new = splice_polyline(np.asarray(stored, np.float64), world, self.config.vma_overlap)
+        else:  # not the stretch the car has passed (mapping.passed)
+            new = np.asarray(stored, np.float64)
+            for run in fresh_runs(ego, world, new, self.config.merge_behind):
+                new = splice_polyline(new, run, self.config.vma_overlap)
         self.map.replace(tid, new, frame)
         return True
 

@@ -1,0 +1,64 @@
+"""What a polyline observation may change in the map: not the stretch the car has passed.
+
+A detection covers the whole perception range, and every merge rule of the project lets the
+newest observation win where it overlaps the stored instance. Driving forward, a stretch of a
+line is seen first far ahead, then beside the car, then far behind, so its last view, the one the
+map would keep, is from the rear edge of the range, where detections are the least accurate
+(on the synthetic validation drives the mean point error of the detector's dividers is 0.43 m
+20-30 m behind the car against 0.25 m within 10 m). The stored stretch behind the car was
+written by a nearer view.
+
+``fresh_runs`` therefore leaves out of an observation the points that lie more than ``behind``
+metres behind the ego *and* on the stored instance already (within ``COVER`` metres of it,
+projecting inside it): the car has passed them and the map holds a nearer view. Points behind
+the car that the instance does not cover yet (a stretch first seen after a turn, an extension
+beyond its ends) still merge. What is left is split into contiguous runs, each merged on its own.
+
+Used by every method that merges polylines (``MapperConfig.merge_behind``, shared so that a
+comparison applies the same rule to all); crossings keep their own rule (``mapping.crossings``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+
+from icmapper.geom import project_onto_polyline
+
+#: Metres within which a point of the observation lies on the stored instance.
+COVER = 1.0
+
+
+def fresh_runs(
+    ego: NDArray[np.floating],
+    world: NDArray[np.floating],
+    stored: NDArray[np.floating],
+    behind: float,
+) -> list[NDArray[np.float64]]:
+    """The parts of a polyline observation that merge into the stored instance, longest first.
+
+    ego (n, 2) and world (n, 2): the observation in the ego frame (x forward) and in the world
+    frame; stored (m, 2) world: the instance's polyline. ``behind`` (m, > 0; 0 keeps everything):
+    points with ego x < -behind that lie within ``COVER`` of the stored polyline, projecting
+    between its ends, are left out. Returns (k, 2) float64 world runs of at least 2 points (an
+    empty list when nothing is left); the whole observation when nothing is left out.
+    """
+    w = np.asarray(world, dtype=np.float64)  # (n, 2)
+    e = np.asarray(ego, dtype=np.float64)  # (n, 2)
+    if e.shape != w.shape or e.ndim != 2 or e.shape[1] != 2:
+        raise ValueError(f"fresh_runs: ego {e.shape} and world {w.shape} must both be (n, 2)")
+    passed = e[:, 0] < -behind if behind > 0 else np.zeros(len(e), bool)  # (n,)
+    if not passed.any():
+        return [w]
+    s_ = np.asarray(stored, dtype=np.float64)  # (m, 2)
+    dist, s = project_onto_polyline(w[passed], s_)  # (p,), (p,)
+    length = float(np.linalg.norm(np.diff(s_, axis=0), axis=1).sum())
+    drop = np.zeros(len(w), bool)  # (n,)
+    drop[passed] = (dist <= COVER) & (s > 0.0) & (s < length)
+    if not drop.any():
+        return [w]
+    # contiguous runs of kept points: boundaries where `keep` changes
+    keep = ~drop
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], keep.astype(np.int8), [0]])))  # (2r,)
+    runs = [w[a:b] for a, b in zip(edges[::2], edges[1::2], strict=True) if b - a >= 2]
+    return sorted(runs, key=len, reverse=True)
