@@ -967,7 +967,10 @@ mod tests {
                 assert!((total(&u) / (s * s) - want_u).abs() < 1e-6, "scale 1e{e}");
                 assert!((total(&v) / (s * s) - want_v).abs() < 1e-6, "scale 1e{e}");
             }
-            assert!(u.iter().chain(&v).all(|r| r.len() >= 3 && signed_area2(r) > 0.0));
+            assert!(u
+                .iter()
+                .chain(&v)
+                .all(|r| r.len() >= 3 && signed_area2(r) > 0.0));
         }
     }
 
