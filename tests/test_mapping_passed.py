@@ -132,3 +132,23 @@ def test_passed_stretch_keeps_the_near_view(name: str) -> None:
     latest = _drift_of_passed_stretch(name, 0.0)
     assert kept < 0.05, f"{name}: {kept:.3f} m off with merge_behind = 5"
     assert latest > 0.4, f"{name}: {latest:.3f} m off with merge_behind = 0 (the far views win)"
+
+
+@pytest.mark.parametrize("splice_overlap", [None, 0.5])
+def test_merge_view_fits_or_splices_the_fresh_runs(splice_overlap: float | None) -> None:
+    """``merge_view`` (Post-Track, stage 2's online map): the passed stretch of the instance is
+    kept, the rest follows the view, by curve fit or by splice."""
+    from icmapper import GlobalMap
+    from icmapper.mapping.passed import merge_view
+
+    m = GlobalMap(smoothing=0.5, spacing=1.0)
+    m.insert_with_id(3, int(MapClass.DIVIDER), _line(-60.0, 60.0, n=121), frame=0)
+    ego = _line(-30.0, 30.0, 0.5, n=61)  # the car at x = 0, the view 0.5 m to the side
+    merge_view(m, 3, ego, ego, 5.0, 1, splice_overlap)
+    pts = np.asarray(m.get(3)[1])
+    passed, ahead = pts[pts[:, 0] < -12.0], pts[(pts[:, 0] > 5.0) & (pts[:, 0] < 25.0)]
+    np.testing.assert_allclose(passed[:, 1], 0.0, atol=1e-12)  # kept exactly
+    np.testing.assert_allclose(
+        ahead[:, 1], 0.5, atol=0.05
+    )  # the view (steps at -5 and 30 m smoothed)
+    assert pts[-1, 0] == pytest.approx(60.0)  # the far end beyond the view is kept too

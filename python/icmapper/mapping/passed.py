@@ -20,10 +20,15 @@ comparison applies the same rule to all); crossings keep their own rule (``mappi
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 from numpy.typing import NDArray
 
 from icmapper.geom import project_onto_polyline
+
+if TYPE_CHECKING:
+    from icmapper._icmap import GlobalMap
 
 #: Metres within which a point of the observation lies on the stored instance.
 COVER = 1.0
@@ -62,3 +67,24 @@ def fresh_runs(
     edges = np.flatnonzero(np.diff(np.concatenate([[0], keep.astype(np.int8), [0]])))  # (2r,)
     runs = [w[a:b] for a, b in zip(edges[::2], edges[1::2], strict=True) if b - a >= 2]
     return sorted(runs, key=len, reverse=True)
+
+
+def merge_view(
+    global_map: GlobalMap,
+    target: int,
+    ego: NDArray[np.floating],
+    world: NDArray[np.floating],
+    behind: float,
+    frame: int,
+    splice_overlap: float | None = None,
+) -> None:
+    """Merges a polyline view (ego (n, 2) and world (n, 2), the same points) into instance
+    ``target`` of the map: its ``fresh_runs`` one after the other, each by the engine's curve fit
+    (``GlobalMap.merge``), or spliced in (``GlobalMap.splice``) when ``splice_overlap`` is given.
+    ValueError for degenerate geometry (the runs before it stay merged)."""
+    stored = global_map.get(int(target))[1]
+    for run in fresh_runs(ego, world, stored, behind):
+        if splice_overlap is None:
+            global_map.merge(int(target), run, frame)
+        else:
+            global_map.splice(int(target), run, splice_overlap, frame)

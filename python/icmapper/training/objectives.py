@@ -19,7 +19,7 @@ from torch import nn
 from icmapper.data.types import MapClass, ego_to_world, pose_to_xy_yaw
 from icmapper.mapping.config import MapperConfig
 from icmapper.mapping.crossings import CrossingMerger
-from icmapper.mapping.splice import splice_into
+from icmapper.mapping.passed import merge_view
 from icmapper.models.detector import DetectorOutput, DetectorState, MapDetector
 from icmapper.models.losses import (
     DetectionCriterion,
@@ -266,7 +266,8 @@ class Stage2Objective(nn.Module):
     above the score threshold are matched to the GT (their IDs are the GT IDs: oracle identities
     for training), fused with the history of the same ID sampled from the online global map, and the
     fused points (detached) merged into the map (crossings by the ``[mapper]`` table's
-    ``crossing_merge``, fused polylines by its ``fused_merge``, as at inference)."""
+    ``crossing_merge``, fused polylines by its ``fused_merge``, the passed stretch left alone by
+    its ``merge_behind``, as at inference)."""
 
     def __init__(
         self, net: ICMapperNet, cfg: TrainConfig, map_factory: Callable[[], Any] | None = None
@@ -285,6 +286,7 @@ class Stage2Objective(nn.Module):
         mapper_cfg = MapperConfig.from_dict(cfg.mapper)
         self.crossing_merge = mapper_cfg.crossing_merge
         self.fused_merge, self.splice_overlap = mapper_cfg.fused_merge, mapper_cfg.splice_overlap
+        self.merge_behind = mapper_cfg.merge_behind
         for mod in (self.detector, self.association):
             mod.requires_grad_(False)
 
@@ -392,10 +394,10 @@ class Stage2Objective(nn.Module):
                         crossing = int(cls[j]) == MapClass.PED_CROSSING
                         if i in gmap and crossing:
                             crossings.merge(gmap, i, world, final[j], t)
-                        elif i in gmap and bool(has[j]) and self.fused_merge == "splice":
-                            splice_into(gmap, i, world, self.splice_overlap, t)
-                        elif i in gmap:
-                            gmap.merge(i, world, frame=t)
+                        elif i in gmap:  # spliced or fitted, not the passed stretch
+                            spliced = bool(has[j]) and self.fused_merge == "splice"
+                            overlap = self.splice_overlap if spliced else None
+                            merge_view(gmap, i, final[j], world, self.merge_behind, t, overlap)
                         else:
                             gmap.insert_with_id(i, int(cls[j]), world, frame=t)
                             if crossing:

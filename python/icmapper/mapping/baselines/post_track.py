@@ -23,7 +23,7 @@ from icmapper.mapping.baselines.common import new_global_map, read_frame
 from icmapper.mapping.config import MapperConfig
 from icmapper.mapping.crossings import CrossingMerger
 from icmapper.mapping.methods import MethodInfo, register_method
-from icmapper.mapping.passed import fresh_runs
+from icmapper.mapping.passed import merge_view
 from icmapper.mapping.tracker import Tracker, positional_affinity
 from icmapper.mapping.types import DetectionSource, StepResult
 
@@ -94,9 +94,7 @@ class PostTrack:
             if MapClass(cls).closed:
                 self.crossings.merge(self.map, tid, world, ego, frame)
             else:  # not the stretch the car has passed (mapping.passed)
-                stored = self.map.get(tid)[1]
-                for run in fresh_runs(ego, world, stored, self.config.merge_behind):
-                    self.map.merge(tid, run, frame)
+                merge_view(self.map, tid, ego, world, self.config.merge_behind, frame)
             return True
         self.map.insert_with_id(tid, cls, world, frame)
         if MapClass(cls).closed:
