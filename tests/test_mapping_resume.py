@@ -179,6 +179,8 @@ def test_corrupt_sidecar_refused(tmp_path: Path, sim_seq: Sequence) -> None:
         arrays = {k: z[k] for k in z.files}
     for key, val in (
         ("version", np.array(99, np.int64)),
+        ("version", np.array([2, 2], np.int64)),  # malformed: not a scalar
+        ("version", np.array(2.0)),  # malformed: not an integer
         ("crossing_counts", np.array([[1, -1]], np.int64)),
         ("crossing_counts", arrays["crossing_counts"].reshape(-1)),
         ("track_counts", arrays["track_counts"] + 1),

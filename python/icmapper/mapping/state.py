@@ -166,7 +166,8 @@ def _parse_state(
     """Validates the sidecar arrays and builds the tracker buffer and counters from them."""
     from icmapper.mapping.mapper import STAGES, MapperStats
 
-    version = int(z["version"])
+    # (_read_state refused another scalar version already; here a malformed one is refused)
+    version = int(_int_array(z, "version", ndim=0))
     if version != STATE_VERSION:
         raise ValueError(f"format version {version}, this build reads {STATE_VERSION}")
     if str(z["map_sha256"]) != _sha256(map_path):
