@@ -14,6 +14,10 @@ projecting inside it): the car has passed them and the map holds a nearer view. 
 the car that the instance does not cover yet (a stretch first seen after a turn, an extension
 beyond its ends) still merge. What is left is split into contiguous runs, each merged on its own.
 
+"Behind" is along the ego's heading: a car reversing passes stretches ahead of its heading, and
+the rule then keeps the stretch it is reversing into as the map holds it (its first views still
+merge where the instance lacks them).
+
 Used by every method that merges polylines (``MapperConfig.merge_behind``, shared so that a
 comparison applies the same rule to all); crossings keep their own rule (``mapping.crossings``).
 """
