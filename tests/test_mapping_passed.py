@@ -46,9 +46,12 @@ def test_passed_points_the_instance_lacks_still_merge() -> None:
     front, rear = fresh_runs(obs, obs, stored, 5.0)
     np.testing.assert_array_equal(front, obs[obs[:, 0] >= -5.0])
     np.testing.assert_array_equal(rear, obs[obs[:, 0] <= -10.0])
-    # Beside the instance, farther than COVER: never seen before, kept whole.
-    (run,) = fresh_runs(obs + [0.0, COVER + 1.0], obs + [0.0, COVER + 1.0], stored, 5.0)
+    # Beside the instance, farther than COVER: never seen before, kept whole; within it, on it.
+    far, near = obs + [0.0, COVER + 1.0], obs + [0.0, COVER - 0.5]
+    (run,) = fresh_runs(far, far, _line(-60.0, 60.0), 5.0)
     assert len(run) == len(obs)
+    (run,) = fresh_runs(near, near, _line(-60.0, 60.0), 5.0)
+    np.testing.assert_array_equal(run, near[obs[:, 0] >= -5.0])
 
 
 def test_world_frame_is_used_for_the_instance() -> None:

@@ -11,8 +11,16 @@ written by a nearer view.
 ``fresh_runs`` therefore leaves out of an observation the points that lie more than ``behind``
 metres behind the ego *and* on the stored instance already (within ``COVER`` metres of it,
 projecting inside it): the car has passed them and the map holds a nearer view. Points behind
-the car that the instance does not cover yet (a stretch first seen after a turn, an extension
-beyond its ends) still merge. What is left is split into contiguous runs, each merged on its own.
+the car that the instance does not cover yet (an extension beyond its ends, a stretch farther
+than ``COVER`` from it) still merge. What is left is split into contiguous runs, each merged on
+its own.
+
+``COVER`` is 3 m. With 1 m, the views' points more than 1 m beside the instance were merged:
+with the oracle's detections on a synthetic city (`sim-city:val:0:8`, `oracle:low`) a track
+that alternated between parallel lines drew them into a zigzag (single-drive mCD 0.617 m). With
+no limit at all (every passed point inside the instance left out), the learned detector's
+boundaries on the validation drives came out worse (Post-Track CD_bound 0.432 -> 0.460 m); 3 m
+does neither (0.616 m; 0.440 m).
 
 "Behind" is along the ego's heading: a car reversing passes stretches ahead of its heading, and
 the rule then keeps the stretch it is reversing into as the map holds it (its first views still
@@ -35,7 +43,7 @@ if TYPE_CHECKING:
     from icmapper._icmap import GlobalMap
 
 #: Metres within which a point of the observation lies on the stored instance.
-COVER = 1.0
+COVER = 3.0
 
 
 def fresh_runs(
