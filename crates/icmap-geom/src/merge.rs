@@ -329,7 +329,7 @@ pub fn merge_polyline(
     window.extend_from_slice(&d);
     window.extend(stored(&|c| c > hi && c <= hi + FIT_CONTEXT));
     let mut before = stored(&|c| c < lo - FIT_CONTEXT);
-    let mut after = stored(&|c| c > hi + FIT_CONTEXT);
+    let after = stored(&|c| c > hi + FIT_CONTEXT);
     let fitted = fit_or_polyline(&window, s, spacing)?;
     if before.is_empty() && after.is_empty() {
         return Ok(fitted);
@@ -339,15 +339,13 @@ pub fn merge_polyline(
     let mut joined: Vec<Point> = Vec::with_capacity(fitted.len() + 2);
     joined.extend(before.pop());
     joined.extend_from_slice(&fitted);
-    if !after.is_empty() {
-        joined.push(after.remove(0));
-    }
+    joined.extend(after.first());
     before.extend(resample_spacing(
         &dedup_cow(&joined, DEDUP_EPS, false),
         spacing,
         false,
     )?);
-    before.extend(after);
+    before.extend(after.iter().skip(1));
     Ok(before)
 }
 

@@ -38,6 +38,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from icmapper.geom import project_onto_polyline
+from icmapper.mapping.splice import splice_into, splice_polyline
 
 if TYPE_CHECKING:
     from icmapper._icmap import GlobalMap
@@ -99,4 +100,20 @@ def merge_view(
         if splice_overlap is None:
             global_map.merge(int(target), run, frame)
         else:
-            global_map.splice(int(target), run, splice_overlap, frame)
+            splice_into(global_map, target, run, splice_overlap, frame)
+
+
+def splice_view(
+    stored: NDArray[np.floating],
+    ego: NDArray[np.floating],
+    world: NDArray[np.floating],
+    behind: float,
+    overlap: float,
+) -> NDArray[np.float64]:
+    """The stored polyline (m, 2) world with a view (ego and world (n, 2), the same points)
+    spliced in by ``splice.splice_polyline`` (the VMA and PolyMerge rules): its ``fresh_runs``
+    one after the other -> (k, 2) float64 world."""
+    new = np.asarray(stored, dtype=np.float64)
+    for run in fresh_runs(ego, world, new, behind):
+        new = splice_polyline(new, run, overlap)
+    return new

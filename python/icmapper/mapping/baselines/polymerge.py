@@ -25,8 +25,8 @@ from icmapper.mapping.baselines.common import new_global_map, read_frame
 from icmapper.mapping.config import MapperConfig
 from icmapper.mapping.crossings import CrossingMerger
 from icmapper.mapping.methods import MethodInfo, register_method
-from icmapper.mapping.passed import fresh_runs
-from icmapper.mapping.splice import overlap_fraction, splice_polyline
+from icmapper.mapping.passed import splice_view
+from icmapper.mapping.splice import overlap_fraction
 from icmapper.mapping.types import DetectionSource, StepResult
 
 if TYPE_CHECKING:
@@ -94,10 +94,8 @@ class PolyMerge:
                     self.crossings.merge(self.map, best, world, dets.points[i], frame.index)
                 else:
                     _, stored = self.map.get(best)
-                    new = np.asarray(stored, np.float64)
                     ego = dets.points[i]  # not the stretch the car has passed (mapping.passed)
-                    for run in fresh_runs(ego, world, new, self.config.merge_behind):
-                        new = splice_polyline(new, run, self.buffer)
+                    new = splice_view(stored, ego, world, self.config.merge_behind, self.buffer)
                     self.map.replace(best, new, frame.index)
                 merged.append(best)
             ids[i] = best

@@ -20,8 +20,8 @@ from scipy.spatial import ConvexHull, QhullError
 from icmapper.data.types import MapClass
 from icmapper.mapping.baselines.post_track import PostTrack
 from icmapper.mapping.methods import MethodInfo, register_method
-from icmapper.mapping.passed import fresh_runs
-from icmapper.mapping.splice import inside_ring, ring_distance, splice_polyline
+from icmapper.mapping.passed import splice_view
+from icmapper.mapping.splice import inside_ring, ring_distance
 
 if TYPE_CHECKING:
     pass
@@ -46,9 +46,8 @@ class VmaMerge(PostTrack):
         if MapClass(cls).closed:
             new = splice_ring(np.asarray(stored, np.float64), world, self.config.vma_overlap)
         else:  # not the stretch the car has passed (mapping.passed)
-            new = np.asarray(stored, np.float64)
-            for run in fresh_runs(ego, world, new, self.config.merge_behind):
-                new = splice_polyline(new, run, self.config.vma_overlap)
+            cfg = self.config
+            new = splice_view(stored, ego, world, cfg.merge_behind, cfg.vma_overlap)
         self.map.replace(tid, new, frame)
         return True
 
