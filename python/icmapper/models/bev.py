@@ -1,9 +1,10 @@
 """BEV features from multi-camera image features, and the temporal BEV memory.
 
-``ViewTransformer``: BEVFormer-style spatial cross-attention built on ``grid_sample``. Each BEV
-cell is a pillar of points at a few heights; each point is projected into every camera with its
-intrinsics/extrinsics; the image features sampled there are combined with learned weights over
-(camera, height) (softmax over the valid projections), then projected, with a residual and an FFN.
+``ViewTransformer``: BEVFormer-style spatial cross-attention. Each BEV cell is a pillar of points at
+a few heights; each point is projected into every camera with its intrinsics/extrinsics; the image
+features bilinearly sampled there are combined with learned weights over (camera, height) (softmax
+over the valid projections), then projected, with a residual and an FFN. Only the valid samples
+are used, and their weighted sums are one sparse matrix product (``weighted_sample_sum``).
 
 ``BevNeck``: a few residual 3x3 convolutions on each frame's BEV, so that every cell sees its
 neighbours before the temporal memory and the decoder (without it the BEV is a per-cell attention
@@ -17,6 +18,8 @@ cells along ego y (left, -hy..hy); cell centres at ((i + 0.5) / X, (j + 0.5) / Y
 """
 
 from __future__ import annotations
+
+import warnings
 
 import torch
 import torch.nn.functional as F
@@ -120,51 +123,127 @@ class ViewTransformer(nn.Module):
         # The value projection is linear and bilinear sampling is linear with zero padding, so the
         # image features are projected once per pixel (not once per sample), without the bias,
         # which is added after sampling: the same values as projecting every sample.
-        vmap = F.conv2d(
-            feats.reshape(b * ncam, c_img, fh, fw), self.value.weight[:, :, None, None]
-        )  # (B*Ncam, C, h, w)
+        pixels = feats.permute(0, 1, 3, 4, 2).reshape(-1, c_img)  # (B*Ncam*h*w, C_img)
+        flat = pixels @ self.value.weight.t()  # (B*Ncam*h*w, C) the value map's pixels
         # Only the valid samples (pillar points in front of a camera and inside its image; a
-        # small share of all (camera, cell, height) triples) are gathered.
-        ib, ic, icell, iz = valid.nonzero(as_tuple=True)  # (V,) each
-        value = bilinear_gather(vmap, ib * ncam + ic, grid[ib, ic, icell, iz].to(vmap.dtype))
-        value = value + self.value.bias  # (V, C)
+        # small share of all (camera, cell, height) triples) are used, ordered by BEV cell so that
+        # each cell's samples are contiguous (the rows of a sparse matrix).
+        ib, icell, ic, iz = valid.permute(0, 2, 1, 3).nonzero(as_tuple=True)  # (V,) each
+        idx, bw = bilinear_corners(grid[ib, ic, icell, iz], ib * ncam + ic, fh, fw)  # (V, 4) each
+        bias = self.value.bias  # (C,) added to every sample's value after sampling
+        # feat_logits is linear too: a sample's logit is the bilinear sample of a one-channel map.
+        a, a0 = self.feat_logits.weight[0], self.feat_logits.bias[0]  # (C,), ()
+        lmap = flat @ a.to(flat.dtype)  # (M*h*w,)
+        slog = (lmap[idx] * bw.to(lmap.dtype)).sum(1) + (bias @ a + a0).to(lmap.dtype)  # (V,)
         q = self.query  # (N, C)
         k = ic * z + iz  # (V,) column of the (camera, height) pair
-        logits = torch.full((b, n, ncam * z), -1e4, dtype=value.dtype, device=value.device)
+        logits = torch.full((b, n, ncam * z), -1e4, dtype=slog.dtype, device=slog.device)
         qlog = self.query_logits(q)  # (N, Ncam*Z)
         logits = logits.index_put(
-            (ib, icell, k), (qlog[icell, k] + self.feat_logits(value).squeeze(-1)).to(logits.dtype)
+            (ib, icell, k), (qlog[icell, k] + slog).to(logits.dtype)
         )  # (B, N, Ncam*Z); invalid pairs stay -1e4 (autocast may give the logits another dtype)
-        weights = torch.softmax(logits.float(), dim=-1).to(value.dtype)  # (B, N, Ncam*Z)
+        weights = torch.softmax(logits.float(), dim=-1)  # (B, N, Ncam*Z)
         w = weights[ib, icell, k]  # (V,) invalid pairs weigh 0; cells seen by no camera get 0
-        agg = torch.zeros(b * n, value.shape[1], dtype=value.dtype, device=value.device)
-        agg = agg.index_add(0, ib * n + icell, w[:, None] * value).reshape(b, n, -1)  # (B, N, C)
+        rows = ib * n + icell  # (V,) sorted
+        with torch.autocast(flat.device.type, enabled=False):
+            agg = weighted_sample_sum(flat.float(), w, rows, idx, bw, b * n)  # (B*N, C)
+            wsum = torch.zeros(b * n, device=w.device).index_add(0, rows, w)  # (B*N,)
+            agg = agg + wsum[:, None] * bias.float()  # (B*N, C)
+        agg = agg.to(flat.dtype).reshape(b, n, -1)  # (B, N, C)
         x = self.norm1(q[None] + self.proj(agg))  # (B, N, C)
         x = self.norm2(x + self.ffn(x))  # (B, N, C)
         return x.transpose(1, 2).reshape(b, -1, self.bev_x, self.bev_y)  # (B, C, X, Y)
 
 
-def bilinear_gather(maps: torch.Tensor, which: torch.Tensor, grid: torch.Tensor) -> torch.Tensor:
-    """Bilinear samples of feature maps at scattered points: ``grid_sample`` semantics
-    (``align_corners=False``, zero padding) for one point per row.
+def bilinear_corners(
+    grid: torch.Tensor, which: torch.Tensor, h: int, w: int
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """The four pixels and weights of bilinear samples (``grid_sample`` semantics:
+    ``align_corners=False``, zero padding) of feature maps of size (h, w) stacked as rows
+    ``map * h * w + y * w + x``.
 
-    maps (M, C, h, w); which (V,) the map of each point; grid (V, 2) as (x, y) in [-1, 1] of the
-    map's width and height -> (V, C).
+    grid (V, 2) as (x, y) in [-1, 1] of the map's width and height; which (V,) the map of each
+    point -> idx (V, 4) rows, weight (V, 4) (0 for a corner outside its map).
     """
-    m, c, h, w = maps.shape
-    flat = maps.permute(0, 2, 3, 1).reshape(m * h * w, c)  # (M*h*w, C)
+    grid = grid.float()
     x = ((grid[:, 0] + 1) * w - 1) / 2  # (V,) pixel coordinates
     y = ((grid[:, 1] + 1) * h - 1) / 2
     x0, y0 = torch.floor(x), torch.floor(y)
     fx, fy = x - x0, y - y0  # (V,)
-    out = flat.new_zeros(grid.shape[0], c)  # (V, C)
-    for dx, dy, wt in ((0, 0, (1 - fx) * (1 - fy)), (1, 0, fx * (1 - fy)),
-                       (0, 1, (1 - fx) * fy), (1, 1, fx * fy)):  # fmt: skip
-        xi, yi = (x0 + dx).long(), (y0 + dy).long()  # (V,)
-        inside = (xi >= 0) & (xi < w) & (yi >= 0) & (yi < h)  # (V,) zero padding outside
-        idx = which * (h * w) + yi.clamp(0, h - 1) * w + xi.clamp(0, w - 1)  # (V,)
-        out = out + (wt * inside)[:, None] * flat[idx]  # (V, C)
-    return out
+    xs = torch.stack([x0, x0 + 1, x0, x0 + 1], dim=1).long()  # (V, 4)
+    ys = torch.stack([y0, y0, y0 + 1, y0 + 1], dim=1).long()  # (V, 4)
+    wt = torch.stack([(1 - fx) * (1 - fy), fx * (1 - fy), (1 - fx) * fy, fx * fy], dim=1)
+    inside = (xs >= 0) & (xs < w) & (ys >= 0) & (ys < h)  # (V, 4) zero padding outside
+    idx = which[:, None] * (h * w) + ys.clamp(0, h - 1) * w + xs.clamp(0, w - 1)  # (V, 4)
+    return idx, wt * inside
+
+
+def _csr(
+    crow: torch.Tensor, cols: torch.Tensor, values: torch.Tensor, size: tuple[int, int]
+) -> torch.Tensor:
+    """A sparse CSR matrix of ``size`` (rows' column runs given by ``crow``), built without
+    torch's invariant checks and its beta warning (the indices come from ``bilinear_corners``)."""
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", message="Sparse CSR tensor support is in beta")
+        return torch.sparse_csr_tensor(
+            crow, cols.reshape(-1), values.reshape(-1), size, check_invariants=False
+        )
+
+
+class _WeightedSampleSum(torch.autograd.Function):
+    """out[r] = sum over the samples v of row r of w[v] * (bilinear sample v of ``flat``), as one
+    sparse (rows x pixels) matrix product; no (samples, C) tensor is made, forward or backward.
+    Gradients for ``flat`` and ``w`` (the corners are geometry)."""
+
+    @staticmethod
+    def forward(  # type: ignore[override]
+        ctx: torch.autograd.function.FunctionCtx,
+        flat: torch.Tensor,
+        w: torch.Tensor,
+        rows: torch.Tensor,
+        idx: torch.Tensor,
+        bw: torch.Tensor,
+        num_rows: int,
+    ) -> torch.Tensor:
+        per_row = torch.bincount(rows, minlength=num_rows) * idx.shape[1]  # (R,) 4 per sample
+        crow = torch.cat([per_row.new_zeros(1), per_row.cumsum(0)])  # (R + 1,)
+        mat = _csr(crow, idx, w[:, None] * bw, (num_rows, flat.shape[0]))  # (R, M*h*w)
+        ctx.save_for_backward(flat, bw)
+        ctx.mat = mat
+        return mat @ flat  # (R, C)
+
+    @staticmethod
+    def backward(  # type: ignore[override]
+        ctx: torch.autograd.function.FunctionCtx, grad: torch.Tensor
+    ) -> tuple[torch.Tensor | None, ...]:
+        flat, bw = ctx.saved_tensors  # type: ignore[attr-defined]
+        grad = grad.contiguous()  # (R, C)
+        g_flat = g_w = None
+        if ctx.needs_input_grad[0]:
+            g_flat = ctx.mat.t().to_sparse_csr() @ grad  # type: ignore[attr-defined]
+        if ctx.needs_input_grad[1]:
+            # d out[r] / d w[v] = bilinear sample v of flat, dotted with grad[r]: the products
+            # grad @ flat.T at the matrix's entries only (a sampled matmul), summed per sample.
+            dots = torch.sparse.sampled_addmm(ctx.mat, grad, flat.t(), beta=0.0)  # type: ignore[attr-defined]
+            g_w = (dots.values().reshape(bw.shape) * bw).sum(1)  # (V,)
+        return g_flat, g_w, None, None, None, None
+
+
+def weighted_sample_sum(
+    flat: torch.Tensor,
+    w: torch.Tensor,
+    rows: torch.Tensor,
+    idx: torch.Tensor,
+    bw: torch.Tensor,
+    num_rows: int,
+) -> torch.Tensor:
+    """Weighted sums of bilinear samples, one per output row.
+
+    flat (P, C) pixels (float32 or float64; w and bw are cast to its dtype); w (V,) sample
+    weights; rows (V,) the output row of each sample, sorted; idx, bw (V, 4) from
+    ``bilinear_corners`` -> (num_rows, C).
+    """
+    return _WeightedSampleSum.apply(flat, w.to(flat.dtype), rows, idx, bw.to(flat.dtype), num_rows)  # type: ignore[no-any-return]
 
 
 def warp_bev(
