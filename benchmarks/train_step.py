@@ -1,7 +1,10 @@
 """Training throughput of the former and the current training step in one run. Former: the view
 transformer's dense form (every (camera, BEV cell, height) sample through ``grid_sample`` and the
-value projection) and a channels-first backbone. Current: image features projected once per pixel,
-only the valid samples gathered, and channels-last convolutions.
+value projection), a channels-first backbone and the segmentation targets rasterised one instance
+at a time against every BEV cell. Current: image features projected once per pixel, the valid
+samples' weighted sums as one sparse matrix product (``models.bev.weighted_sample_sum``),
+channels-last convolutions, and targets rasterised for all instances at once over the cells of
+their boxes.
 
 ``python -m benchmarks train-step [--config configs/small.toml] [--steps 5] [--rounds 3]
 [--threads 1]``
@@ -20,11 +23,13 @@ import time
 from pathlib import Path
 from typing import Any
 
+import icmapper.training.objectives as objectives
 import torch
 import torch.nn.functional as F
-from icmapper.models.bev import ViewTransformer
+from icmapper.models.bev import ViewTransformer, bev_cell_centres
 from icmapper.models.detector import MapDetector
 from icmapper.models.network import ICMapperNet
+from icmapper.models.segmentation import CROSSING, rasterise
 from icmapper.testing.clips import SyntheticClips, collate_clips
 from icmapper.training.config import load_config
 from icmapper.training.objectives import Stage1Objective
@@ -63,6 +68,37 @@ def dense_forward(
     return x.transpose(1, 2).reshape(b, -1, vt.bev_x, vt.bev_y)  # (B, C, X, Y)
 
 
+def former_rasterise(
+    points: torch.Tensor,
+    classes: torch.Tensor,
+    bev_x: int,
+    bev_y: int,
+    half_x: float,
+    half_y: float,
+    num_classes: int = 3,
+) -> torch.Tensor:
+    """The former ``models.segmentation.rasterise`` (the reference): one instance at a time, each
+    against every BEV cell. Same inputs and output (default line radius)."""
+    radius = 0.75 * max(2 * half_x / bev_x, 2 * half_y / bev_y)
+    centres = bev_cell_centres(bev_x, bev_y, half_x, half_y).reshape(-1, 2)  # (N, 2)
+    out = torch.zeros(num_classes, bev_x * bev_y)
+    for line, k in zip(points.float(), classes.tolist(), strict=True):  # (P, 2), class
+        closed = k == CROSSING
+        a, b = (line, line.roll(-1, 0)) if closed else (line[:-1], line[1:])  # (S, 2) segments
+        ab = b - a
+        t = ((centres[:, None] - a) * ab).sum(-1) / (ab * ab).sum(-1).clamp(min=1e-12)  # (N, S)
+        near = centres[:, None] - (a + t.clamp(0, 1)[..., None] * ab)  # (N, S, 2)
+        hit = near.norm(dim=-1).min(dim=1).values <= radius  # (N,)
+        if closed:
+            ya, yb = a[:, 1], b[:, 1]  # (S,)
+            py, px = centres[:, 1:2], centres[:, 0:1]  # (N, 1)
+            dy = torch.where(yb == ya, torch.ones_like(yb), yb - ya)
+            x_at = a[:, 0] + (py - ya) / dy * (b[:, 0] - a[:, 0])  # (N, S)
+            hit = hit | ((((ya > py) != (yb > py)) & (px < x_at)).sum(-1) % 2 == 1)
+        out[k] = torch.maximum(out[k], hit.float())
+    return out.reshape(num_classes, bev_x, bev_y)
+
+
 def contiguous_image_features(det: MapDetector, images: torch.Tensor) -> torch.Tensor:
     """The former ``MapDetector.image_features``: the backbone in the default (channels-first)
     memory format."""
@@ -75,16 +111,19 @@ def contiguous_image_features(det: MapDetector, images: torch.Tensor) -> torch.T
 
 def use_former_step(det: MapDetector, former: bool) -> None:
     """Switches the detector between the former step (dense view transformer, channels-first
-    backbone) and the current one; the weights are shared."""
+    backbone, targets rasterised one instance at a time) and the current one; the weights are
+    shared."""
     vt = det.view
     if former:
         vt.forward = lambda *a: dense_forward(vt, *a)  # type: ignore[method-assign]
         det.image_features = lambda im: contiguous_image_features(det, im)  # type: ignore[method-assign]
         det.backbone.to(memory_format=torch.contiguous_format)
+        objectives.rasterise = former_rasterise  # type: ignore[assignment]
     else:
         vt.__dict__.pop("forward", None)
         det.__dict__.pop("image_features", None)
         det.backbone.to(memory_format=torch.channels_last)
+        objectives.rasterise = rasterise
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -131,9 +170,20 @@ def main(argv: list[str] | None = None) -> int:
         ref = det.view(det.image_features(img), *cams)  # (B, C, X, Y)
         use_former_step(det, False)
         diff = float((det.view(det.image_features(img), *cams) - ref).abs().max())
+        r = cfg.perception_range
+        gts = [objectives.prepare_gt(g[0], det, img.device) for g in batch["gt"]]
+        grid = (det.cfg.bev_x, det.cfg.bev_y, r.half_x, r.half_y)
+        same = all(
+            torch.equal(
+                rasterise(g["points"], g["classes"], *grid),
+                former_rasterise(g["points"], g["classes"], *grid),
+            )
+            for g in gts
+        )
     o, n = statistics.median(old), statistics.median(new)
     print(f"config {args.config}, {args.threads} thread(s), {frames} frames per pass")
     print(f"former step : {o:7.2f} training frames/s  (passes: {[round(v, 2) for v in old]})")
     print(f"current step: {n:7.2f} training frames/s  (passes: {[round(v, 2) for v in new]})")
-    print(f"speed-up {n / o:.2f}x   (BEV max abs difference {diff:.2e})")
+    print(f"speed-up {n / o:.2f}x   (BEV max abs difference {diff:.2e}, "
+          f"segmentation targets {'identical' if same else 'DIFFERENT'})")  # fmt: skip
     return 0

@@ -39,22 +39,23 @@ class SegHead(nn.Module):
 
 
 def _point_segment_distance(p: torch.Tensor, a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
-    """Distances of points p (N, 2) to segments a->b (S, 2) each -> (N, S)."""
-    ab = b - a  # (S, 2)
-    denom = (ab * ab).sum(-1).clamp(min=1e-12)  # (S,)
-    t = (((p[:, None] - a[None]) * ab[None]).sum(-1) / denom).clamp(0, 1)  # (N, S)
-    closest = a[None] + t[..., None] * ab[None]  # (N, S, 2)
-    return (p[:, None] - closest).norm(dim=-1)
+    """Distances of points p (M, 2) to the segments a->b (M, S, 2) of each point -> (M, S)."""
+    ab = b - a  # (M, S, 2)
+    denom = (ab * ab).sum(-1).clamp(min=1e-12)  # (M, S)
+    d = p[:, None] - a  # (M, S, 2)
+    t = ((d * ab).sum(-1) / denom).clamp(0, 1)  # (M, S)
+    return (d - t[..., None] * ab).norm(dim=-1)
 
 
-def _inside(p: torch.Tensor, ring: torch.Tensor) -> torch.Tensor:
-    """Even-odd point-in-polygon: p (N, 2), ring (R, 2) implicitly closed -> (N,) bool."""
-    a, b = ring, ring.roll(-1, 0)  # (R, 2) edges a -> b
-    ya, yb = a[:, 1][None], b[:, 1][None]  # (1, R)
-    py, px = p[:, 1:2], p[:, 0:1]  # (N, 1)
-    crosses = (ya > py) != (yb > py)  # (N, R) the edge straddles the horizontal line through p
+def _inside(p: torch.Tensor, rings: torch.Tensor) -> torch.Tensor:
+    """Even-odd point-in-polygon: p (M, 2), rings (M, R, 2) implicitly closed, one per point
+    -> (M,) bool."""
+    a, b = rings, rings.roll(-1, 1)  # (M, R, 2) edges a -> b
+    ya, yb = a[..., 1], b[..., 1]  # (M, R)
+    py, px = p[:, 1:2], p[:, 0:1]  # (M, 1)
+    crosses = (ya > py) != (yb > py)  # (M, R) the edge straddles the horizontal line through p
     dy = torch.where(yb == ya, torch.ones_like(yb), yb - ya)
-    x_at = a[:, 0][None] + (py - ya) / dy * (b[:, 0] - a[:, 0])[None]  # (N, R)
+    x_at = a[..., 0] + (py - ya) / dy * (b[..., 0] - a[..., 0])  # (M, R)
     return ((crosses & (px < x_at)).sum(-1) % 2) == 1
 
 
@@ -81,20 +82,27 @@ def rasterise(
     cell = max(2 * half_x / bev_x, 2 * half_y / bev_y)
     radius = 0.75 * cell if line_radius is None else line_radius
     centres = bev_cell_centres(bev_x, bev_y, half_x, half_y).to(points.device).reshape(-1, 2)
+    cls = classes.long()
+    if bool(((cls < 0) | (cls >= num_classes)).any()):
+        bad = int(cls[(cls < 0) | (cls >= num_classes)][0])
+        raise ValueError(f"class {bad} out of range for {num_classes} classes")
     out = torch.zeros(num_classes, bev_x * bev_y, dtype=torch.float32, device=points.device)
-    pts = points.float()
-    for g in range(pts.shape[0]):
-        k = int(classes[g])
-        if not 0 <= k < num_classes:
-            raise ValueError(f"class {k} out of range for {num_classes} classes")
-        line = pts[g]  # (P, 2)
-        closed = k == CROSSING
-        # segments a -> b: consecutive points, and the closing edge of a crossing's contour
-        a, b = (line, line.roll(-1, 0)) if closed else (line[:-1], line[1:])
-        hit = _point_segment_distance(centres, a, b).min(dim=1).values <= radius  # (N,)
-        if closed:
-            hit = hit | _inside(centres, line)
-        out[k] = torch.maximum(out[k], hit.float())
+    if points.shape[0] == 0:
+        return out.reshape(num_classes, bev_x, bev_y)
+    pts = points.float()  # (G, P, 2)
+    closed = cls == CROSSING  # (G,)
+    # only the (instance, cell) pairs inside the instance's box grown by the radius can be hit
+    lo, hi = pts.amin(1) - radius, pts.amax(1) + radius  # (G, 2)
+    cand = ((centres[None] >= lo[:, None]) & (centres[None] <= hi[:, None])).all(-1)  # (G, N)
+    gi, ni = cand.nonzero(as_tuple=True)  # (M,) each
+    p, line = centres[ni], pts[gi]  # (M, 2), (M, P, 2)
+    # segments a -> b: consecutive points, and the closing edge of a crossing's contour (the
+    # closing edge of an open polyline is left out by an infinite distance)
+    dist = _point_segment_distance(p, line, line.roll(-1, 1))  # (M, P)
+    dist[:, -1] = torch.where(closed[gi], dist[:, -1], torch.inf)
+    hit = dist.min(dim=1).values <= radius  # (M,)
+    hit = hit | (closed[gi] & _inside(p, line))
+    out[cls[gi[hit]], ni[hit]] = 1.0
     return out.reshape(num_classes, bev_x, bev_y)
 
 
