@@ -1,6 +1,8 @@
-"""The view transformer's sparse path (features projected once per pixel, only valid samples
-gathered) against the dense reference it replaced (grid_sample of every (camera, cell, height)
-sample, then the value projection), values and gradients; bilinear_gather against grid_sample."""
+"""The view transformer's sparse path (features projected once per pixel, the valid samples'
+weighted sums one sparse matrix product) against the dense reference it replaced (grid_sample of
+every (camera, cell, height) sample, then the value projection), values and gradients;
+bilinear_corners against grid_sample; weighted_sample_sum against gather-and-add and finite
+differences; the batched rasterisation against the former per-instance loop."""
 
 from __future__ import annotations
 
