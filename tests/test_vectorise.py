@@ -361,3 +361,21 @@ def test_stage2_matches_segmentation_instances_to_the_truth() -> None:
     assert len(ids) >= 3 and len(set(ids)) == len(ids) and pts.shape == (len(ids), 20, 2)
     truth_cls = dict(zip(g["ids"].tolist(), g["classes"].tolist(), strict=True))
     assert all(truth_cls[i] == int(c) for i, c in zip(ids, cls.tolist(), strict=True))
+
+
+def test_order_branch_walks_from_the_lowest_end() -> None:
+    """A branch's cells come back in path order from its lowest end, whatever order they are
+    given in; edge neighbours are taken before diagonal ones; a closed loop starts at its lowest
+    cell."""
+    from icmapper.models.vectorise import _order_branch
+
+    path = np.array([[3, 1], [3, 2], [4, 3], [5, 3], [6, 4], [6, 5]])  # (L, 2) diagonal steps
+    rng = np.random.default_rng(0)
+    for _ in range(5):
+        got = _order_branch(path[rng.permutation(len(path))])
+        assert np.array_equal(got, path)
+    corner = np.array([[0, 0], [0, 1], [1, 1], [1, 2]])  # (1, 1) is an edge neighbour of (0, 1)
+    assert np.array_equal(_order_branch(corner[::-1]), corner)
+    ring = np.array([[0, 1], [1, 0], [1, 2], [2, 1]])  # every cell has two neighbours
+    assert np.array_equal(_order_branch(ring), [[0, 1], [1, 0], [2, 1], [1, 2]])
+    assert np.array_equal(_order_branch(np.array([[7, 7]])), [[7, 7]])

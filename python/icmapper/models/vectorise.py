@@ -113,30 +113,34 @@ def resample_polyline(line: NDArray[np.float64], n: int, closed: bool) -> NDArra
     return np.stack([x, y], axis=-1).astype(np.float32)
 
 
+#: The 8 neighbour offsets in the order a path walk prefers them: edge neighbours before
+#: diagonal ones, then by coordinate (the walk takes the first unvisited one).
+_WALK = ((-1, 0), (0, -1), (0, 1), (1, 0), (-1, -1), (-1, 1), (1, -1), (1, 1))
+
+
 def _order_branch(cells: NDArray[np.int64]) -> NDArray[np.int64]:
-    """The cells (L, 2) of one skeleton branch (no junctions) in path order, from an end."""
-    member = {(int(i), int(j)) for i, j in cells}
-
-    def neighbours(p: tuple[int, int]) -> list[tuple[int, int]]:
-        out = []
-        for di in (-1, 0, 1):
-            for dj in (-1, 0, 1):
-                q = (p[0] + di, p[1] + dj)
-                if (di or dj) and q in member:
-                    out.append(q)
-        return out
-
-    ends = sorted(p for p in member if len(neighbours(p)) <= 1)
-    cur = ends[0] if ends else min(member)
-    path, seen = [cur], {cur}
+    """The cells (L, 2) of one skeleton branch (no junctions) in path order, from an end: the
+    lowest (i, j) cell with at most one neighbour (the lowest cell when there is none), then
+    always the first unvisited neighbour in ``_WALK`` order."""
+    lo = cells.min(axis=0) - 1
+    local = cells - lo  # (L, 2) inside a 1-cell border
+    grid = np.full(tuple(local.max(axis=0) + 2), -1, np.int64)
+    grid[local[:, 0], local[:, 1]] = np.arange(len(cells))
+    nb = np.stack([grid[local[:, 0] + di, local[:, 1] + dj] for di, dj in _WALK], 1)  # (L, 8)
+    ends = np.nonzero((nb >= 0).sum(1) <= 1)[0]
+    pool = ends if len(ends) else np.arange(len(cells))
+    cur = int(pool[np.lexsort((cells[pool, 1], cells[pool, 0]))[0]])
+    nbl = nb.tolist()
+    seen = [False] * len(cells)
+    seen[cur] = True
+    path = [cur]
     while True:
-        nxt = [q for q in neighbours(cur) if q not in seen]
-        if not nxt:
+        cur = next((q for q in nbl[cur] if q >= 0 and not seen[q]), -1)
+        if cur < 0:
             break
-        cur = min(nxt, key=lambda q: (abs(q[0] - cur[0]) + abs(q[1] - cur[1]), q))
-        seen.add(cur)
+        seen[cur] = True
         path.append(cur)
-    return np.asarray(path, dtype=np.int64)
+    return cells[np.asarray(path, np.int64)]
 
 
 def _fill(xy: NDArray[np.float64], half_cell: float) -> float:
