@@ -176,3 +176,22 @@ def test_weighted_sample_sum_values_and_gradients() -> None:
     empty = torch.zeros(0, dtype=torch.long)
     none = weighted_sample_sum(flat, w[:0], empty, idx[:0], bw[:0].double(), 16)
     assert torch.equal(none, torch.zeros(16, 3, dtype=torch.float64))
+
+
+def test_view_transformer_with_no_valid_sample() -> None:
+    """Cameras that see no BEV cell (here lifted 1 km up, looking at the sky's horizon): the
+    sparse sum is empty and every cell keeps its query alone, with gradients for the weights."""
+    torch.manual_seed(0)
+    vt = ViewTransformer(16, 24, 20, 10, RANGE_60x30.half_x, RANGE_60x30.half_y, (-1.0, 0.5), 6)
+    k, e = default_rig(6, (64, 176))
+    e = e.copy()
+    e[:, 2, 3] += 1000.0  # every camera 1 km above the ground
+    intr, c2e = torch.from_numpy(k)[None], torch.from_numpy(e)[None]  # (1, Ncam, 3|4, 3|4)
+    _, valid = vt.project(intr, c2e, (64, 176))
+    assert not bool(valid.any())
+    feats = torch.randn(1, 6, 16, 8, 22, requires_grad=True)  # (B, Ncam, C, h, w)
+    out = vt(feats, intr, c2e, (64, 176))  # (B, C, X, Y)
+    ref = dense_forward(vt, feats, intr, c2e, (64, 176))
+    torch.testing.assert_close(out, ref, atol=2e-5, rtol=1e-4)
+    out.square().sum().backward()
+    assert vt.query.grad is not None and torch.isfinite(vt.query.grad).all()
