@@ -133,7 +133,7 @@ class ViewTransformer(nn.Module):
         bias = self.value.bias  # (C,) added to every sample's value after sampling
         # feat_logits is linear too: a sample's logit is the bilinear sample of a one-channel map.
         a, a0 = self.feat_logits.weight[0], self.feat_logits.bias[0]  # (C,), ()
-        lmap = flat @ a.to(flat.dtype)  # (M*h*w,)
+        lmap = flat @ a.to(flat.dtype)  # (B*Ncam*h*w,)
         slog = (lmap[idx] * bw.to(lmap.dtype)).sum(1) + (bias @ a + a0).to(lmap.dtype)  # (V,)
         q = self.query  # (N, C)
         k = ic * z + iz  # (V,) column of the (camera, height) pair
@@ -207,7 +207,7 @@ class _WeightedSampleSum(torch.autograd.Function):
     ) -> torch.Tensor:
         per_row = torch.bincount(rows, minlength=num_rows) * idx.shape[1]  # (R,) 4 per sample
         crow = torch.cat([per_row.new_zeros(1), per_row.cumsum(0)])  # (R + 1,)
-        mat = _csr(crow, idx, w[:, None] * bw, (num_rows, flat.shape[0]))  # (R, M*h*w)
+        mat = _csr(crow, idx, w[:, None] * bw, (num_rows, flat.shape[0]))  # (R, P) rows x pixels
         ctx.save_for_backward(flat, bw)
         ctx.mat = mat
         return mat @ flat  # (R, C)
