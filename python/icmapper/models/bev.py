@@ -193,7 +193,11 @@ def _csr(
 class _WeightedSampleSum(torch.autograd.Function):
     """out[r] = sum over the samples v of row r of w[v] * (bilinear sample v of ``flat``), as one
     sparse (rows x pixels) matrix product; no (samples, C) tensor is made, forward or backward.
-    Gradients for ``flat`` and ``w`` (the corners are geometry)."""
+    Gradients for ``flat`` and ``w`` (the corners are geometry).
+
+    The matrix is a valid CSR matrix: the (row, pixel) entries of all samples' corners are
+    sorted and the duplicates (two samples of one cell on the same pixel) summed, as torch's
+    sparse kernels require (unsorted or repeated columns in a row crash them)."""
 
     @staticmethod
     def forward(  # type: ignore[override]
@@ -205,10 +209,15 @@ class _WeightedSampleSum(torch.autograd.Function):
         bw: torch.Tensor,
         num_rows: int,
     ) -> torch.Tensor:
-        per_row = torch.bincount(rows, minlength=num_rows) * idx.shape[1]  # (R,) 4 per sample
+        num_px = flat.shape[0]
+        key = (rows[:, None] * num_px + idx).reshape(-1)  # (4V,) row-major entry of each corner
+        uniq, inverse = torch.unique(key, sorted=True, return_inverse=True)  # (U,), (4V,)
+        values = torch.zeros(uniq.shape[0], dtype=flat.dtype, device=flat.device)
+        values = values.index_add(0, inverse, (w[:, None] * bw).reshape(-1))  # (U,) summed
+        per_row = torch.bincount(uniq // num_px, minlength=num_rows)  # (R,)
         crow = torch.cat([per_row.new_zeros(1), per_row.cumsum(0)])  # (R + 1,)
-        mat = _csr(crow, idx, w[:, None] * bw, (num_rows, flat.shape[0]))  # (R, P) rows x pixels
-        ctx.save_for_backward(flat, bw)
+        mat = _csr(crow, uniq % num_px, values, (num_rows, num_px))  # (R, P) rows x pixels
+        ctx.save_for_backward(flat, bw, inverse)
         ctx.mat = mat
         return mat @ flat  # (R, C)
 
@@ -216,16 +225,16 @@ class _WeightedSampleSum(torch.autograd.Function):
     def backward(  # type: ignore[override]
         ctx: torch.autograd.function.FunctionCtx, grad: torch.Tensor
     ) -> tuple[torch.Tensor | None, ...]:
-        flat, bw = ctx.saved_tensors  # type: ignore[attr-defined]
+        flat, bw, inverse = ctx.saved_tensors  # type: ignore[attr-defined]
         grad = grad.contiguous()  # (R, C)
         g_flat = g_w = None
         if ctx.needs_input_grad[0]:
             g_flat = ctx.mat.t().to_sparse_csr() @ grad  # type: ignore[attr-defined]
         if ctx.needs_input_grad[1]:
             # d out[r] / d w[v] = bilinear sample v of flat, dotted with grad[r]: the products
-            # grad @ flat.T at the matrix's entries only (a sampled matmul), summed per sample.
+            # grad @ flat.T at the matrix's entries only (a sampled matmul), then per corner.
             dots = torch.sparse.sampled_addmm(ctx.mat, grad, flat.t(), beta=0.0)  # type: ignore[attr-defined]
-            g_w = (dots.values().reshape(bw.shape) * bw).sum(1)  # (V,)
+            g_w = (dots.values()[inverse].reshape(bw.shape) * bw).sum(1)  # (V,)
         return g_flat, g_w, None, None, None, None
 
 
