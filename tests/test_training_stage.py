@@ -164,6 +164,25 @@ def test_snapshots_are_inference_checkpoints(tmp_path: Path) -> None:
     assert load_network(snaps[-1]).step == 4
 
 
+def test_amp_cpu_runs_the_objective_under_bf16_autocast(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """``amp_cpu`` puts the training forward under CPU bf16 autocast; ``amp`` alone does not
+    (it is for a GPU), and the losses stay finite."""
+    seen: list[bool] = []
+    forward = Stage1Objective.forward
+
+    def recording(self: Stage1Objective, batch: dict) -> dict:
+        seen.append(torch.is_autocast_enabled("cpu"))
+        return forward(self, batch)
+
+    monkeypatch.setattr(Stage1Objective, "forward", recording)
+    res = train(tiny_config(amp_cpu=True), 1, tmp_path / "bf16", max_steps=2, progress=False)
+    train(tiny_config(amp=True), 1, tmp_path / "fp32", max_steps=2, progress=False)
+    assert seen == [True, True, False, False]
+    assert all(np.isfinite(v) for v in res["losses"].values())
+
+
 def test_stage2_gradients_reach_fusion_only() -> None:
     cfg = tiny_config()
     torch.manual_seed(0)

@@ -1,8 +1,8 @@
 """Training configuration: TOML files loaded into validated, frozen dataclasses.
 
 A config has the tables [model], [data], [stage1], [stage2] and top-level keys (name, seed, amp,
-...). Unknown keys and bad values raise ``ValueError`` naming the key. ``config_to_dict`` gives
-plain Python data (stored in checkpoints).
+amp_cpu, ...). Unknown keys and bad values raise ``ValueError`` naming the key.
+``config_to_dict`` gives plain Python data (stored in checkpoints).
 """
 
 from __future__ import annotations
@@ -83,7 +83,11 @@ class TrainConfig:
 
     name: str = "small"
     seed: int = 0
-    amp: bool = True
+    amp: bool = True  # bf16 autocast of the training forward on a GPU
+    #: the same on the CPU: 1.2x a stage-1 step on a CPU with native bf16 (AVX-512 BF16 / AMX),
+    #: the losses of 2,250 steps as in float32 (BENCHMARKS.md); slower on a CPU without it.
+    #: Off in the shipped recipe, which trained in float32.
+    amp_cpu: bool = False
     log_every: int = 10
     ckpt_every: int = 200
     #: every N steps also keep an inference-only copy OUT/snapshots/stage{n}_step{N:06d}.pt, for

@@ -330,7 +330,8 @@ def train(
             find_unused_parameters=True,
         )
     ds, collate = dataset if dataset is not None else build_dataset(cfg, stage)
-    use_amp = cfg.amp and info.device.type == "cuda"
+    dev_type = info.device.type
+    amp = (cfg.amp and dev_type == "cuda") or (cfg.amp_cpu and dev_type == "cpu")
     log = None
     if info.is_main:
         out.mkdir(parents=True, exist_ok=True)
@@ -353,7 +354,7 @@ def train(
         for group in opt.param_groups:
             group["lr"] = lr
         batch = to_device(batch, info.device)
-        ctx = torch.autocast("cuda", dtype=torch.bfloat16) if use_amp else contextlib.nullcontext()
+        ctx = torch.autocast(dev_type, dtype=torch.bfloat16) if amp else contextlib.nullcontext()
         with ctx:
             losses = model(batch)
         if not torch.isfinite(losses["loss"].detach()):
