@@ -21,15 +21,21 @@ class BasicBlock(nn.Module):
         self.conv2 = nn.Conv2d(c_out, c_out, 3, 1, 1, bias=False)
         self.bn2 = nn.BatchNorm2d(c_out)
         self.down: nn.Module = nn.Identity()
+        self.down_stride = stride
         if stride != 1 or c_in != c_out:
+            # A 1x1 convolution of stride s is the 1x1 convolution of every s-th pixel; written
+            # so because oneDNN's backward of the strided 1x1 convolution crashes the process
+            # (segmentation fault) for some small shapes on more than one thread (8 -> 16
+            # channels on 7 images of 8 x 16, torch 2.15; tests/test_models_backbone.py).
             self.down = nn.Sequential(
-                nn.Conv2d(c_in, c_out, 1, stride, bias=False), nn.BatchNorm2d(c_out)
+                nn.Conv2d(c_in, c_out, 1, 1, bias=False), nn.BatchNorm2d(c_out)
             )
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         y = F.relu(self.bn1(self.conv1(x)))
         y = self.bn2(self.conv2(y))
-        return F.relu(y + self.down(x))
+        s = self.down_stride
+        return F.relu(y + self.down(x[:, :, ::s, ::s] if s > 1 else x))
 
 
 class ResNetBackbone(nn.Module):
