@@ -126,8 +126,7 @@ class ViewTransformer(nn.Module):
         pixels = feats.permute(0, 1, 3, 4, 2).reshape(-1, c_img)  # (B*Ncam*h*w, C_img)
         flat = pixels @ self.value.weight.t()  # (B*Ncam*h*w, C) the value map's pixels
         # Only the valid samples (pillar points in front of a camera and inside its image; a
-        # small share of all (camera, cell, height) triples) are used, ordered by BEV cell so that
-        # each cell's samples are contiguous (the rows of a sparse matrix).
+        # small share of all (camera, cell, height) triples) are used, in BEV-cell order.
         ib, icell, ic, iz = valid.permute(0, 2, 1, 3).nonzero(as_tuple=True)  # (V,) each
         idx, bw = bilinear_corners(grid[ib, ic, icell, iz], ib * ncam + ic, fh, fw)  # (V, 4) each
         bias = self.value.bias  # (C,) added to every sample's value after sampling
@@ -144,7 +143,7 @@ class ViewTransformer(nn.Module):
         )  # (B, N, Ncam*Z); invalid pairs stay -1e4 (autocast may give the logits another dtype)
         weights = torch.softmax(logits.float(), dim=-1)  # (B, N, Ncam*Z)
         w = weights[ib, icell, k]  # (V,) invalid pairs weigh 0; cells seen by no camera get 0
-        rows = ib * n + icell  # (V,) sorted
+        rows = ib * n + icell  # (V,) output row of each sample
         with torch.autocast(flat.device.type, enabled=False):
             agg = weighted_sample_sum(flat.float(), w, rows, idx, bw, b * n)  # (B*N, C)
             wsum = torch.zeros(b * n, device=w.device).index_add(0, rows, w)  # (B*N,)
@@ -197,7 +196,7 @@ class _WeightedSampleSum(torch.autograd.Function):
 
     The matrix is a valid CSR matrix: the (row, pixel) entries of all samples' corners are
     sorted and the duplicates (two samples of one cell on the same pixel) summed, as torch's
-    sparse kernels require (unsorted or repeated columns in a row crash them)."""
+    sparse kernels assume (``_csr`` does not check it), whatever the order of the samples."""
 
     @staticmethod
     def forward(  # type: ignore[override]
@@ -249,7 +248,7 @@ def weighted_sample_sum(
     """Weighted sums of bilinear samples, one per output row.
 
     flat (P, C) pixels (float32 or float64; w and bw are cast to its dtype); w (V,) sample
-    weights; rows (V,) the output row of each sample, sorted; idx, bw (V, 4) from
+    weights; rows (V,) the output row of each sample, in any order; idx, bw (V, 4) from
     ``bilinear_corners`` -> (num_rows, C).
     """
     return _WeightedSampleSum.apply(flat, w.to(flat.dtype), rows, idx, bw.to(flat.dtype), num_rows)  # type: ignore[no-any-return]
