@@ -129,7 +129,7 @@ class MapDetector(nn.Module):
         x = images.flatten(0, 1)  # (B*N, 3, H, W)
         x = x.float() / 255.0 if x.dtype == torch.uint8 else x.float()
         x = ((x - self.pix_mean) / self.pix_std).contiguous(memory_format=torch.channels_last)
-        f = self.backbone(x).contiguous()  # (B*N, C, h, w)
+        f = self.backbone(x)  # (B*N, C, h, w) channels-last, as the view transformer reads it
         return f.reshape(b, n, *f.shape[1:])
 
     def bev_features(
