@@ -173,7 +173,10 @@ def test_amp_cpu_runs_the_objective_under_bf16_autocast(
     forward = Stage1Objective.forward
 
     def recording(self: Stage1Objective, batch: dict) -> dict:
-        seen.append(torch.is_autocast_enabled("cpu"))
+        if hasattr(torch, "get_autocast_dtype"):  # torch >= 2.4: the device-type argument
+            seen.append(torch.is_autocast_enabled("cpu"))
+        else:
+            seen.append(torch.is_autocast_cpu_enabled())  # torch 2.2 / 2.3
         return forward(self, batch)
 
     monkeypatch.setattr(Stage1Objective, "forward", recording)
