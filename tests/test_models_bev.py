@@ -6,6 +6,7 @@ differences; the batched rasterisation against the former per-instance loop."""
 
 from __future__ import annotations
 
+import pytest
 import torch
 import torch.nn.functional as F
 from icmapper.data.types import RANGE_60x30
@@ -43,6 +44,38 @@ def test_sparse_view_transformer_equals_dense_reference() -> None:
     grads_ref = torch.autograd.grad(ref.square().sum(), [feats, vt.value.weight, vt.query])
     for a, r in zip(grads, grads_ref, strict=True):
         torch.testing.assert_close(a, r, atol=1e-4, rtol=1e-3)
+
+
+def test_view_transformer_keeps_the_geometry_of_the_same_cameras() -> None:
+    """The samples' geometry is kept while the same cameras come again and made anew for other
+    cameras or another feature size; a change of the caller's tensors in place is seen (the
+    kept cameras are copies). Every output equals the dense reference."""
+    torch.manual_seed(0)
+    vt = ViewTransformer(16, 24, 20, 10, RANGE_60x30.half_x, RANGE_60x30.half_y, (-1.0, 0.5), 6)
+    k, e = default_rig(6, (64, 176))
+    intr = torch.from_numpy(k)[None].repeat(2, 1, 1, 1)  # (B, Ncam, 3, 3)
+    c2e = torch.from_numpy(e)[None].repeat(2, 1, 1, 1)  # (B, Ncam, 4, 4)
+    feats = torch.randn(2, 6, 16, 8, 22)  # (B, Ncam, C, h, w)
+
+    def check(f: torch.Tensor) -> None:
+        with torch.no_grad():
+            out = vt(f, intr, c2e, (64, 176))
+            torch.testing.assert_close(out, dense_forward(vt, f, intr, c2e, (64, 176)),
+                                       atol=2e-5, rtol=1e-4)  # fmt: skip
+
+    check(feats)
+    first = vt._geometry
+    check(feats + 1.0)  # other images, the same cameras: kept
+    assert vt._geometry is first
+    c2e[1, 0, 0, 3] += 0.5  # the caller moves a camera in place: made anew
+    check(feats)
+    assert vt._geometry is not first
+    second = vt._geometry
+    check(torch.randn(2, 6, 16, 4, 11))  # another feature size: made anew
+    assert vt._geometry is not second and vt._geometry.feat_size == (4, 11)
+    intr, c2e = intr[:1], c2e[:1]  # another batch size
+    check(feats[:1])
+    assert vt._geometry.ib.max() == 0
 
 
 def test_view_transformer_under_autocast() -> None:
@@ -153,7 +186,7 @@ def test_weighted_sample_sum_values_and_gradients() -> None:
     """The sparse weighted sum against the plain gather-and-add, and its gradients by finite
     differences (float64), with several samples of one row on the same pixel and rows with
     no sample."""
-    from icmapper.models.bev import weighted_sample_sum
+    from icmapper.models.bev import sample_pattern, weighted_sample_sum
 
     g = torch.Generator().manual_seed(1)
     maps = torch.randn(2, 3, 4, 5, generator=g, dtype=torch.float64)  # (M, C, h, w)
@@ -176,6 +209,17 @@ def test_weighted_sample_sum_values_and_gradients() -> None:
     empty = torch.zeros(0, dtype=torch.long)
     none = weighted_sample_sum(flat, w[:0], empty, idx[:0], bw[:0].double(), 16)
     assert torch.equal(none, torch.zeros(16, 3, dtype=torch.float64))
+    # a pattern made beforehand (as the view transformer keeps it) gives the same, and the
+    # gradients through its transpose agree too; one made for another matrix is refused
+    pattern = sample_pattern(rows, idx, 16, flat.shape[0])
+    kept = weighted_sample_sum(flat, w, rows, idx, bw.double(), 16, pattern)
+    assert torch.equal(kept, got)
+    g_kept = torch.autograd.grad(kept.square().sum(), [flat, w])
+    g_got = torch.autograd.grad(got.square().sum(), [flat, w])
+    for a, r in zip(g_kept, g_got, strict=True):
+        torch.testing.assert_close(a, r)
+    with pytest.raises(ValueError, match="pattern is for 16 rows"):
+        weighted_sample_sum(flat, w, rows, idx, bw.double(), 17, pattern)
 
 
 def test_view_transformer_with_no_valid_sample() -> None:

@@ -20,6 +20,7 @@ cells along ego y (left, -hy..hy); cell centres at ((i + 0.5) / X, (j + 0.5) / Y
 from __future__ import annotations
 
 import warnings
+from dataclasses import dataclass
 
 import torch
 import torch.nn.functional as F
@@ -90,6 +91,7 @@ class ViewTransformer(nn.Module):
             nn.Linear(channels, 2 * channels), nn.ReLU(), nn.Linear(2 * channels, channels)
         )
         self.norm2 = nn.LayerNorm(channels)
+        self._geometry: SampleGeometry | None = None  # the last cameras' (``geometry``)
 
     def project(
         self, intrinsics: torch.Tensor, cam_to_ego: torch.Tensor, image_size: tuple[int, int]
@@ -108,6 +110,39 @@ class ViewTransformer(nn.Module):
         valid = (depth > 0.1) & (grid.abs() <= 1).all(-1)  # (B, Ncam, N, Z)
         return grid, valid
 
+    def geometry(
+        self,
+        intrinsics: torch.Tensor,
+        cam_to_ego: torch.Tensor,
+        image_size: tuple[int, int],
+        feat_size: tuple[int, int],
+    ) -> SampleGeometry:
+        """The valid samples of these cameras on feature maps of ``feat_size`` (h, w), their
+        bilinear corners and the sparse pattern of their sums (``SampleGeometry``).
+
+        They depend on the cameras only, not on the images or the weights, so the last ones are
+        kept and reused while the same cameras come again (every frame of a drive, every clip of
+        a fixed rig): an equality test of the camera tensors instead of the projection, the
+        selection of the valid samples and two sorts (the pattern and its transpose)."""
+        key = (intrinsics, cam_to_ego, tuple(image_size), tuple(feat_size))
+        last = self._geometry
+        if last is not None and last.matches(*key):
+            return last
+        grid, valid = self.project(intrinsics, cam_to_ego, image_size)
+        b, ncam, n, _ = valid.shape
+        fh, fw = feat_size
+        # Only the valid samples (pillar points in front of a camera and inside its image; a
+        # small share of all (camera, cell, height) triples) are used, in BEV-cell order.
+        ib, icell, ic, iz = valid.permute(0, 2, 1, 3).nonzero(as_tuple=True)  # (V,) each
+        idx, bw = bilinear_corners(grid[ib, ic, icell, iz], ib * ncam + ic, fh, fw)  # (V, 4) each
+        rows = ib * n + icell  # (V,) output row of each sample
+        pattern = sample_pattern(rows, idx, b * n, b * ncam * fh * fw)
+        self._geometry = SampleGeometry(
+            intrinsics.detach().clone(), cam_to_ego.detach().clone(), tuple(image_size),
+            tuple(feat_size), ib, icell, ic, iz, rows, idx, bw, pattern,
+        )  # fmt: skip
+        return self._geometry
+
     def forward(
         self,
         feats: torch.Tensor,
@@ -118,17 +153,14 @@ class ViewTransformer(nn.Module):
         b, ncam, c_img, fh, fw = feats.shape
         if ncam != self.num_cameras:
             raise ValueError(f"expected {self.num_cameras} cameras, got {ncam}")
-        grid, valid = self.project(intrinsics, cam_to_ego, image_size)
-        n, z = grid.shape[2], grid.shape[3]
+        geo = self.geometry(intrinsics, cam_to_ego, image_size, (fh, fw))
+        ib, icell, ic, iz, idx, bw = geo.ib, geo.icell, geo.ic, geo.iz, geo.idx, geo.bw
+        n, z = self.pillars.shape[0], self.num_heights
         # The value projection is linear and bilinear sampling is linear with zero padding, so the
         # image features are projected once per pixel (not once per sample), without the bias,
         # which is added after sampling: the same values as projecting every sample.
         pixels = feats.permute(0, 1, 3, 4, 2).reshape(-1, c_img)  # (B*Ncam*h*w, C_img)
         flat = pixels @ self.value.weight.t()  # (B*Ncam*h*w, C) the value map's pixels
-        # Only the valid samples (pillar points in front of a camera and inside its image; a
-        # small share of all (camera, cell, height) triples) are used, in BEV-cell order.
-        ib, icell, ic, iz = valid.permute(0, 2, 1, 3).nonzero(as_tuple=True)  # (V,) each
-        idx, bw = bilinear_corners(grid[ib, ic, icell, iz], ib * ncam + ic, fh, fw)  # (V, 4) each
         bias = self.value.bias  # (C,) added to every sample's value after sampling
         # feat_logits is linear too: a sample's logit is the bilinear sample of a one-channel map.
         a, a0 = self.feat_logits.weight[0], self.feat_logits.bias[0]  # (C,), ()
@@ -143,10 +175,9 @@ class ViewTransformer(nn.Module):
         )  # (B, N, Ncam*Z); invalid pairs stay -1e4 (autocast may give the logits another dtype)
         weights = torch.softmax(logits.float(), dim=-1)  # (B, N, Ncam*Z)
         w = weights[ib, icell, k]  # (V,) invalid pairs weigh 0; cells seen by no camera get 0
-        rows = ib * n + icell  # (V,) output row of each sample
         with torch.autocast(flat.device.type, enabled=False):
-            agg = weighted_sample_sum(flat.float(), w, rows, idx, bw, b * n)  # (B*N, C)
-            wsum = torch.zeros(b * n, device=w.device).index_add(0, rows, w)  # (B*N,)
+            agg = weighted_sample_sum(flat.float(), w, geo.rows, idx, bw, b * n, geo.pattern)
+            wsum = torch.zeros(b * n, device=w.device).index_add(0, geo.rows, w)  # (B*N,)
             agg = agg + wsum[:, None] * bias.float()  # (B*N, C)
         agg = agg.to(flat.dtype).reshape(b, n, -1)  # (B, N, C)
         x = self.norm1(q[None] + self.proj(agg))  # (B, N, C)
@@ -189,52 +220,117 @@ def _csr(
         )
 
 
+@dataclass(frozen=True)
+class SamplePattern:
+    """The sparsity pattern of the (rows x pixels) matrix of ``weighted_sample_sum``: the
+    (row, pixel) entries of all samples' four corners, sorted, duplicates (two samples of one row
+    on the same pixel) once, as torch's sparse CSR kernels assume; and the same for its
+    transpose (pixels x rows), which the backward multiplies by."""
+
+    crow: torch.Tensor  # (R + 1,) where each row's entries start
+    cols: torch.Tensor  # (U,) the pixel of each entry
+    inverse: torch.Tensor  # (4V,) the entry of each corner (idx.reshape(-1) order)
+    t_crow: torch.Tensor  # (P + 1,) the transpose's rows (pixels)
+    t_cols: torch.Tensor  # (U,) the transpose's columns (rows)
+    t_order: torch.Tensor  # (U,) the entry of each entry of the transpose
+    num_rows: int  # R
+    num_px: int  # P
+
+
+def sample_pattern(
+    rows: torch.Tensor, idx: torch.Tensor, num_rows: int, num_px: int
+) -> SamplePattern:
+    """The pattern of samples in output rows ``rows`` (V,), in any order, with corners ``idx``
+    (V, 4) (from ``bilinear_corners``) among ``num_px`` pixels."""
+    key = (rows[:, None] * num_px + idx).reshape(-1)  # (4V,) row-major entry of each corner
+    uniq, inverse = torch.unique(key, sorted=True, return_inverse=True)  # (U,), (4V,)
+    row, col = uniq // num_px, uniq % num_px  # (U,) each
+    crow = torch.cat([row.new_zeros(1), torch.bincount(row, minlength=num_rows).cumsum(0)])
+    t_order = torch.argsort(col * num_rows + row)  # (U,) the transpose's row-major order
+    t_crow = torch.cat([col.new_zeros(1), torch.bincount(col, minlength=num_px).cumsum(0)])
+    return SamplePattern(crow, col, inverse, t_crow, row[t_order], t_order, num_rows, num_px)
+
+
+@dataclass(frozen=True)
+class SampleGeometry:
+    """What the view transformer's sampling takes from the cameras alone (``ViewTransformer
+    .geometry``): the valid samples, as (batch, BEV cell, camera, height) indices (V,) each, in
+    BEV-cell order; their output rows (V,); their bilinear corners and weights (V, 4) on the
+    stacked feature maps; the pattern of their sums."""
+
+    intrinsics: torch.Tensor  # (B, N_cam, 3, 3) the cameras it was made for
+    cam_to_ego: torch.Tensor  # (B, N_cam, 4, 4)
+    image_size: tuple[int, int]
+    feat_size: tuple[int, int]
+    ib: torch.Tensor
+    icell: torch.Tensor
+    ic: torch.Tensor
+    iz: torch.Tensor
+    rows: torch.Tensor
+    idx: torch.Tensor
+    bw: torch.Tensor
+    pattern: SamplePattern
+
+    def matches(
+        self,
+        intrinsics: torch.Tensor,
+        cam_to_ego: torch.Tensor,
+        image_size: tuple[int, int],
+        feat_size: tuple[int, int],
+    ) -> bool:
+        """Whether these are the cameras and sizes it was made for (equal values)."""
+        return (
+            image_size == self.image_size
+            and feat_size == self.feat_size
+            and _same(intrinsics, self.intrinsics)
+            and _same(cam_to_ego, self.cam_to_ego)
+        )
+
+
+def _same(a: torch.Tensor, b: torch.Tensor) -> bool:
+    return a.shape == b.shape and a.dtype == b.dtype and a.device == b.device and torch.equal(a, b)
+
+
 class _WeightedSampleSum(torch.autograd.Function):
     """out[r] = sum over the samples v of row r of w[v] * (bilinear sample v of ``flat``), as one
     sparse (rows x pixels) matrix product; no (samples, C) tensor is made, forward or backward.
-    Gradients for ``flat`` and ``w`` (the corners are geometry).
-
-    The matrix is a valid CSR matrix: the (row, pixel) entries of all samples' corners are
-    sorted and the duplicates (two samples of one cell on the same pixel) summed, as torch's
-    sparse kernels assume (``_csr`` does not check it), whatever the order of the samples."""
+    Gradients for ``flat`` and ``w`` (the corners are geometry). The matrix's pattern
+    (``SamplePattern``) gives its entries; the weights of a sample's corners are summed into
+    them."""
 
     @staticmethod
     def forward(  # type: ignore[override]
         ctx: torch.autograd.function.FunctionCtx,
         flat: torch.Tensor,
         w: torch.Tensor,
-        rows: torch.Tensor,
-        idx: torch.Tensor,
         bw: torch.Tensor,
-        num_rows: int,
+        pattern: SamplePattern,
     ) -> torch.Tensor:
-        num_px = flat.shape[0]
-        key = (rows[:, None] * num_px + idx).reshape(-1)  # (4V,) row-major entry of each corner
-        uniq, inverse = torch.unique(key, sorted=True, return_inverse=True)  # (U,), (4V,)
-        values = torch.zeros(uniq.shape[0], dtype=flat.dtype, device=flat.device)
-        values = values.index_add(0, inverse, (w[:, None] * bw).reshape(-1))  # (U,) summed
-        per_row = torch.bincount(uniq // num_px, minlength=num_rows)  # (R,)
-        crow = torch.cat([per_row.new_zeros(1), per_row.cumsum(0)])  # (R + 1,)
-        mat = _csr(crow, uniq % num_px, values, (num_rows, num_px))  # (R, P) rows x pixels
-        ctx.save_for_backward(flat, bw, inverse)
-        ctx.mat = mat
+        pt = pattern
+        values = torch.zeros(pt.cols.shape[0], dtype=flat.dtype, device=flat.device)
+        values = values.index_add(0, pt.inverse, (w[:, None] * bw).reshape(-1))  # (U,) summed
+        mat = _csr(pt.crow, pt.cols, values, (pt.num_rows, pt.num_px))  # (R, P) rows x pixels
+        ctx.save_for_backward(flat, bw, values)
+        ctx.mat, ctx.pattern = mat, pt
         return mat @ flat  # (R, C)
 
     @staticmethod
     def backward(  # type: ignore[override]
         ctx: torch.autograd.function.FunctionCtx, grad: torch.Tensor
     ) -> tuple[torch.Tensor | None, ...]:
-        flat, bw, inverse = ctx.saved_tensors  # type: ignore[attr-defined]
+        flat, bw, values = ctx.saved_tensors  # type: ignore[attr-defined]
+        pt: SamplePattern = ctx.pattern  # type: ignore[attr-defined]
         grad = grad.contiguous()  # (R, C)
         g_flat = g_w = None
         if ctx.needs_input_grad[0]:
-            g_flat = ctx.mat.t().to_sparse_csr() @ grad  # type: ignore[attr-defined]
+            mat_t = _csr(pt.t_crow, pt.t_cols, values[pt.t_order], (pt.num_px, pt.num_rows))
+            g_flat = mat_t @ grad  # (P, C)
         if ctx.needs_input_grad[1]:
             # d out[r] / d w[v] = bilinear sample v of flat, dotted with grad[r]: the products
             # grad @ flat.T at the matrix's entries only (a sampled matmul), then per corner.
             dots = torch.sparse.sampled_addmm(ctx.mat, grad, flat.t(), beta=0.0)  # type: ignore[attr-defined]
-            g_w = (dots.values()[inverse].reshape(bw.shape) * bw).sum(1)  # (V,)
-        return g_flat, g_w, None, None, None, None
+            g_w = (dots.values()[pt.inverse].reshape(bw.shape) * bw).sum(1)  # (V,)
+        return g_flat, g_w, None, None
 
 
 def weighted_sample_sum(
@@ -244,14 +340,23 @@ def weighted_sample_sum(
     idx: torch.Tensor,
     bw: torch.Tensor,
     num_rows: int,
+    pattern: SamplePattern | None = None,
 ) -> torch.Tensor:
     """Weighted sums of bilinear samples, one per output row.
 
     flat (P, C) pixels (float32 or float64; w and bw are cast to its dtype); w (V,) sample
     weights; rows (V,) the output row of each sample, in any order; idx, bw (V, 4) from
-    ``bilinear_corners`` -> (num_rows, C).
+    ``bilinear_corners`` -> (num_rows, C). ``pattern``: ``sample_pattern(rows, idx, num_rows,
+    P)`` when the caller keeps it (it depends on the geometry only); made here otherwise.
     """
-    return _WeightedSampleSum.apply(flat, w.to(flat.dtype), rows, idx, bw.to(flat.dtype), num_rows)  # type: ignore[no-any-return]
+    if pattern is None:
+        pattern = sample_pattern(rows, idx, num_rows, flat.shape[0])
+    elif (pattern.num_rows, pattern.num_px) != (num_rows, flat.shape[0]):
+        raise ValueError(
+            f"weighted_sample_sum: the pattern is for {pattern.num_rows} rows x "
+            f"{pattern.num_px} pixels, got {num_rows} x {flat.shape[0]}"
+        )
+    return _WeightedSampleSum.apply(flat, w.to(flat.dtype), bw.to(flat.dtype), pattern)  # type: ignore[no-any-return]
 
 
 def warp_bev(
