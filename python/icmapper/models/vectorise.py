@@ -50,7 +50,7 @@ class VectoriseParams:
     upsample: int = 4  # bilinear upsampling of the probabilities before thresholding
     threshold: float = 0.5  # probability above which a cell belongs to the class
     min_length: float = 2.0  # shorter line branches are dropped
-    min_area: float = 6.0  # smaller crossing components and parts (m^2) are dropped
+    min_area: float = 2.0  # smaller crossing components (m^2) are dropped
     shrink: float = 0.9  # crossing rectangles shrink by this (the target's line radius)
     rectangularity: float = 0.6  # a crossing mask filling less of its rectangle is split (0: never)
     corner_tolerance: float = 2.0  # Douglas-Peucker tolerance that finds a split mask's corners
