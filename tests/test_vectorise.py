@@ -121,6 +121,17 @@ def test_rectangular_crossing_is_not_split() -> None:
     assert _crossing_iou(inst.points[inst.classes == 0], [rect])[0] > 0.7
 
 
+def test_small_crossing_components_are_dropped() -> None:
+    """A crossing mask smaller than ``min_area`` is dropped, a real one beside it kept."""
+    prob = np.full((3, 200, 100), 0.05)  # a 0.3 m grid over 60 x 30 m
+    prob[0, 20:30, 20:70] = 0.95  # 3 x 15 m: a crossing
+    prob[0, 150:157, 40:47] = 0.95  # 2.1 x 2.1 m = 4.4 m^2: a fragment
+    inst = vectorise(prob, HX, HY, VectoriseParams(upsample=1, min_area=6.0))
+    assert (inst.classes == 0).sum() == 1 and inst.points[0, :, 0].max() < -20
+    loose = vectorise(prob, HX, HY, VectoriseParams(upsample=1))  # the default, 2 m^2
+    assert (loose.classes == 0).sum() == 2
+
+
 def test_skewed_crossing_keeps_its_shape() -> None:
     """A crossing cut obliquely across a road (a parallelogram) comes back as its convex hull,
     closer to it than the rectangle around it."""
