@@ -7,7 +7,11 @@ channels-last convolutions, and targets rasterised for all instances at once ove
 their boxes.
 
 ``python -m benchmarks train-step [--config configs/small.toml] [--steps 5] [--rounds 3]
-[--threads 1]``
+[--threads 1] [--amp-cpu]``
+
+``--amp-cpu``: the current step's forward runs under CPU bf16 autocast, as ``amp_cpu = true``
+trains (the former step stays float32); its numbers differ from float32's in rounding, so the
+BEV check below is made in float32 either way.
 
 Both forms run the same network weights on the same stage-1 batch; passes alternate (old, new,
 old, new, ...) so that a slow spell of a shared machine hits both. Prints training frames/s of
@@ -18,6 +22,7 @@ each gives the same BEV (max abs difference).
 from __future__ import annotations
 
 import argparse
+import contextlib
 import statistics
 import time
 from pathlib import Path
@@ -132,6 +137,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--steps", type=int, default=5, help="training steps per pass")
     ap.add_argument("--rounds", type=int, default=3, help="alternating (old, new) pass pairs")
     ap.add_argument("--threads", type=int, default=1)
+    ap.add_argument("--amp-cpu", action="store_true", help="current step under CPU bf16 autocast")
     args = ap.parse_args(argv)
     torch.set_num_threads(args.threads)
     cfg = load_config(args.config)
@@ -149,9 +155,11 @@ def main(argv: list[str] | None = None) -> int:
 
     def run(former: bool) -> float:
         use_former_step(det, former)
+        bf16 = args.amp_cpu and not former
         t0 = time.perf_counter()
         for _ in range(args.steps):
-            loss = obj(batch)["loss"]
+            with torch.autocast("cpu", dtype=torch.bfloat16) if bf16 else contextlib.nullcontext():
+                loss = obj(batch)["loss"]
             opt.zero_grad()
             loss.backward()
             opt.step()
@@ -183,7 +191,8 @@ def main(argv: list[str] | None = None) -> int:
     o, n = statistics.median(old), statistics.median(new)
     print(f"config {args.config}, {args.threads} thread(s), {frames} frames per pass")
     print(f"former step : {o:7.2f} training frames/s  (passes: {[round(v, 2) for v in old]})")
-    print(f"current step: {n:7.2f} training frames/s  (passes: {[round(v, 2) for v in new]})")
+    what = "current step, bf16 autocast" if args.amp_cpu else "current step"
+    print(f"{what}: {n:7.2f} training frames/s  (passes: {[round(v, 2) for v in new]})")
     print(f"speed-up {n / o:.2f}x   (BEV max abs difference {diff:.2e}, "
           f"segmentation targets {'identical' if same else 'DIFFERENT'})")  # fmt: skip
     return 0

@@ -128,7 +128,10 @@ class ViewTransformer(nn.Module):
         last = self._geometry
         if last is not None and last.matches(*key):
             return last
-        grid, valid = self.project(intrinsics, cam_to_ego, image_size)
+        # in float32 under autocast too: the sample positions are geometry, and the same cameras
+        # must give the same samples with and without autocast
+        with torch.autocast(intrinsics.device.type, enabled=False):
+            grid, valid = self.project(intrinsics, cam_to_ego, image_size)
         b, ncam, n, _ = valid.shape
         fh, fw = feat_size
         # Only the valid samples (pillar points in front of a camera and inside its image; a
