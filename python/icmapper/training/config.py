@@ -84,9 +84,9 @@ class TrainConfig:
     name: str = "small"
     seed: int = 0
     amp: bool = True  # bf16 autocast of the training forward on a GPU
-    #: the same on the CPU: 1.2x a stage-1 step on a CPU with native bf16 (AVX-512 BF16 / AMX),
-    #: the losses of 2,250 steps as in float32 (BENCHMARKS.md); slower on a CPU without it.
-    #: Off in the shipped recipe, which trained in float32.
+    #: the same on the CPU: 1.14-1.2x a stage-1 step on a CPU with native bf16 (AVX-512 BF16 /
+    #: AMX); the losses of 2,250 steps and the AP of 3,000 as in float32 (BENCHMARKS.md); slower
+    #: on a CPU without it. Off in the shipped recipe, which trained in float32.
     amp_cpu: bool = False
     log_every: int = 10
     ckpt_every: int = 200
