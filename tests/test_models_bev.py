@@ -76,6 +76,18 @@ def test_view_transformer_keeps_the_geometry_of_the_same_cameras() -> None:
     intr, c2e = intr[:1], c2e[:1]  # another batch size
     check(feats[:1])
     assert vt._geometry.ib.max() == 0
+    # one made under inference mode is not kept for a step with gradients (it could not be saved
+    # for the backward); the other way round it is
+    with torch.inference_mode():
+        vt._geometry = None
+        vt(feats[:1], intr, c2e, (64, 176))
+    f = feats[:1].clone().requires_grad_()
+    vt(f, intr, c2e, (64, 176)).square().sum().backward()
+    assert f.grad is not None and not vt._geometry.idx.is_inference()
+    kept = vt._geometry
+    with torch.inference_mode():
+        vt(feats[:1], intr, c2e, (64, 176))
+    assert vt._geometry is kept
 
 
 def test_view_transformer_under_autocast() -> None:

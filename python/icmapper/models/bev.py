@@ -281,7 +281,10 @@ class SampleGeometry:
         image_size: tuple[int, int],
         feat_size: tuple[int, int],
     ) -> bool:
-        """Whether these are the cameras and sizes it was made for (equal values)."""
+        """Whether these are the cameras and sizes it was made for (equal values), and it may be
+        used here: one made under ``torch.inference_mode`` cannot be saved for a backward."""
+        if self.idx.is_inference() and not torch.is_inference_mode_enabled():
+            return False
         return (
             image_size == self.image_size
             and feat_size == self.feat_size
