@@ -4,7 +4,9 @@
 a few heights; each point is projected into every camera with its intrinsics/extrinsics; the image
 features bilinearly sampled there are combined with learned weights over (camera, height) (softmax
 over the valid projections), then projected, with a residual and an FFN. Only the valid samples
-are used, and their weighted sums are one sparse matrix product (``weighted_sample_sum``).
+are used, and their weighted sums are one sparse matrix product (``weighted_sample_sum``). Which
+samples are valid, their bilinear corners and the matrix's pattern depend on the cameras alone;
+they are kept while the same cameras come again (``ViewTransformer.geometry``).
 
 ``BevNeck``: a few residual 3x3 convolutions on each frame's BEV, so that every cell sees its
 neighbours before the temporal memory and the decoder (without it the BEV is a per-cell attention
