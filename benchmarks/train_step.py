@@ -2,9 +2,10 @@
 transformer's dense form (every (camera, BEV cell, height) sample through ``grid_sample`` and the
 value projection), a channels-first backbone and the segmentation targets rasterised one instance
 at a time against every BEV cell. Current: image features projected once per pixel, the valid
-samples' weighted sums as one sparse matrix product (``models.bev.weighted_sample_sum``),
-channels-last convolutions, and targets rasterised for all instances at once over the cells of
-their boxes.
+samples' weighted sums as one sparse matrix product (``models.bev.weighted_sample_sum``) whose
+geometry is kept while the cameras repeat (``ViewTransformer.geometry``; the batch's fixed rig,
+as every clip of the synthetic training drives has), channels-last convolutions, and targets
+rasterised for all instances at once over the cells of their boxes.
 
 ``python -m benchmarks train-step [--config configs/small.toml] [--steps 5] [--rounds 3]
 [--threads 1] [--amp-cpu]``
