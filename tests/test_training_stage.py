@@ -130,6 +130,34 @@ def test_seg_head_and_neck_train() -> None:
     assert out.seg_logits is None
 
 
+def test_segmentation_only_stage1() -> None:
+    """``stage1.decoder = false``: the same segmentation loss as the full objective on the same
+    weights and clip (the same streamed BEV), the other losses 0, gradients for the encoder and
+    the head only; the setting needs the segmentation instances and the loss."""
+    seg = {"model": {"bev_neck": 1, "seg_head": True, "instances": "segmentation"}}
+    cfg = tiny_config(**seg, stage1={"seg_weight": 1.0})
+    only = tiny_config(**seg, stage1={"seg_weight": 1.0, "decoder": False})
+    torch.manual_seed(0)
+    net = ICMapperNet(cfg.model, cfg.perception_range)
+    batch = _batch(cfg, clip_len=3)
+    full = Stage1Objective(net, cfg)(batch)
+    losses = Stage1Objective(net, only)(batch)
+    torch.testing.assert_close(losses["seg"], full["seg"])
+    assert all(float(losses[k]) == 0.0 for k in ("det", "trans", "asso"))
+    torch.testing.assert_close(losses["loss"], full["seg"])
+    net.zero_grad()
+    losses["loss"].backward()
+    grads = {n: p.grad for n, p in net.named_parameters()}
+    assert grads["detector.view.query"].abs().sum() > 0
+    assert grads["detector.seg.net.0.weight"].abs().sum() > 0
+    assert all(g is None for n, g in grads.items() if n.startswith(("detector.decoder.",
+               "detector.propagation.", "association.")))  # fmt: skip
+    with pytest.raises(ValueError, match="decoder = false"):
+        tiny_config(model={"seg_head": True}, stage1={"seg_weight": 1.0, "decoder": False})
+    with pytest.raises(ValueError, match="decoder = false"):
+        tiny_config(**seg, stage1={"decoder": False})
+
+
 def test_one_to_many_loss_trains_the_aux_queries() -> None:
     cfg = tiny_config(model={"aux_queries": 5}, stage1={"one_to_many_repeats": 2})
     torch.manual_seed(0)

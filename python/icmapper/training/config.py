@@ -58,6 +58,11 @@ class Stage1Config:
     #: one-to-many matching (needs model.aux_queries > 0): GT repeats and the loss weight
     one_to_many_repeats: int = 6
     one_to_many_weight: float = 1.0
+    #: false: stage 1 trains only the encoder and the segmentation head, on the segmentation
+    #: loss (``model.instances = "segmentation"`` needs nothing else at inference; the set
+    #: decoder, the query propagation and the stage-1 association are left untrained), a faster
+    #: step (BENCHMARKS.md). The shipped recipe trains them (true).
+    decoder: bool = True
     #: train the decoder, query propagation and association on cached BEVs of a frozen encoder
     #: taken from ``--init`` (``icmapper.training.bevcache``); the segmentation loss is off
     freeze_encoder: bool = False
@@ -144,6 +149,12 @@ def _validate(cfg: TrainConfig) -> None:
         raise ValueError(f"config key stage1.seg_weight must be >= 0, got {s1.seg_weight}")
     if s1.seg_weight > 0 and not cfg.model.seg_head:
         raise ValueError("config key stage1.seg_weight > 0 needs model.seg_head = true")
+    if not s1.decoder and (s1.seg_weight <= 0 or cfg.model.instances != "segmentation"):
+        raise ValueError(
+            "config key stage1.decoder = false needs stage1.seg_weight > 0 and "
+            'model.instances = "segmentation" (the instances then come from the segmentation '
+            "head alone)"
+        )
     if s1.steps < 0 or s2.steps < 0 or s1.warmup_steps < 0 or s2.warmup_steps < 0:
         raise ValueError("steps and warmup_steps must be >= 0")
 

@@ -81,7 +81,12 @@ def check_batch(batch: dict) -> None:
 class Stage1Objective(nn.Module):
     """forward(batch) -> {'loss', 'det', 'trans', 'asso', 'seg'} averaged over the clip's frames
     ('seg': the dense BEV segmentation loss, 0 unless ``stage1.seg_weight`` > 0; with
-    ``model.aux_queries`` > 0 also 'o2m', the one-to-many detection loss)."""
+    ``model.aux_queries`` > 0 also 'o2m', the one-to-many detection loss).
+
+    With ``stage1.decoder = false`` only the encoder and the segmentation head train: each frame
+    is ``MapDetector.encode_stream`` (the same BEV and memory, without the set decoder, the query
+    propagation and the association) and the loss is the segmentation loss alone ('det',
+    'trans', 'asso' are 0)."""
 
     def __init__(self, net: ICMapperNet, cfg: TrainConfig) -> None:
         super().__init__()
@@ -94,11 +99,12 @@ class Stage1Objective(nn.Module):
         self.o2m_repeats, self.o2m_weight = s.one_to_many_repeats, s.one_to_many_weight
         self.o2m = net.detector.cfg.aux_queries > 0
         self.detach_state = s.detach_state
+        self.train_decoder = s.decoder
 
-    def seg_targets(self, gts: list[dict], out: DetectorOutput) -> torch.Tensor:
-        """Rasterised GT of one frame (B, K, X, Y) on the BEV grid of ``out.seg_logits``."""
+    def seg_targets(self, gts: list[dict], seg_logits: torch.Tensor) -> torch.Tensor:
+        """Rasterised GT of one frame (B, K, X, Y) on the BEV grid of ``seg_logits``."""
         det = self.detector
-        _, k, nx, ny = out.seg_logits.shape  # type: ignore[union-attr]
+        _, k, nx, ny = seg_logits.shape
         r = det.rng
         return torch.stack(
             [rasterise(g["points"], g["classes"], nx, ny, r.half_x, r.half_y, k) for g in gts]
@@ -135,6 +141,8 @@ class Stage1Objective(nn.Module):
 
     def forward(self, batch: dict) -> dict[str, torch.Tensor]:
         check_batch(batch)
+        if not self.train_decoder:
+            return self.segmentation_only(batch)
         cached = batch["images"] is None  # cached BEVs of a frozen encoder (training.bevcache)
         first = batch["bev"] if cached else batch["images"]  # (B, T, ...)
         dev, t_len = first.device, first.shape[1]
@@ -163,7 +171,7 @@ class Stage1Objective(nn.Module):
                 rep = [repeat_targets(g, self.o2m_repeats) for g in gts]
                 l_o2m = l_o2m + self.criterion(out.aux_logits, out.aux_points, rep)[0]
             if self.seg_weight > 0 and out.seg_logits is not None and not cached:
-                l_seg = l_seg + seg_loss(out.seg_logits, self.seg_targets(gts, out))
+                l_seg = l_seg + seg_loss(out.seg_logits, self.seg_targets(gts, out.seg_logits))
             if out.trans_points is not None and out.prop_src is not None and prev_matches:
                 l_trans = l_trans + trans_loss(out.trans_points, out.prop_src, prev_matches, gts)
             if prev is not None and prev_matches is not None and motion is not None:
@@ -184,6 +192,30 @@ class Stage1Objective(nn.Module):
         total = total + self.o2m_weight * l_o2m
         losses = {"loss": total, "det": l_det, "trans": l_trans, "asso": l_asso, "seg": l_seg}
         return {**losses, "o2m": l_o2m} if self.o2m else losses
+
+    def segmentation_only(self, batch: dict) -> dict[str, torch.Tensor]:
+        """``stage1.decoder = false``: the segmentation loss of every frame, the BEV streamed by
+        ``encode_stream``; the other losses are 0."""
+        det, seg_head = self.detector, self.detector.seg
+        if seg_head is None or batch["images"] is None:
+            raise ValueError("stage1.decoder = false needs a segmentation head and images")
+        dev, t_len = batch["images"].device, batch["images"].shape[1]
+        state: DetectorState | None = None
+        l_seg = batch["images"].new_zeros((), dtype=torch.float32)
+        for t in range(t_len):
+            motion = prev_to_cur(batch["poses"], t) if t > 0 else None
+            bev, nxt = det.encode_stream(
+                batch["images"][:, t], batch["intrinsics"][:, t], batch["cam_to_ego"][:, t],
+                state, motion,
+            )  # fmt: skip
+            logits = seg_head(bev)  # (B, K, X, Y)
+            gts = [prepare_gt(g[t], det, dev) for g in batch["gt"]]
+            l_seg = l_seg + seg_loss(logits, self.seg_targets(gts, logits))
+            state = nxt.detach() if self.detach_state else nxt
+        l_seg = l_seg / t_len
+        zero = l_seg.new_zeros(())
+        losses = {"loss": self.seg_weight * l_seg, "det": zero, "trans": zero, "asso": zero}
+        return {**losses, "seg": l_seg, **({"o2m": zero} if self.o2m else {})}
 
 
 def gt_ids_of(
