@@ -61,7 +61,7 @@ class Stage1Config:
     #: false: stage 1 trains only the encoder and the segmentation head, on the segmentation
     #: loss (``model.instances = "segmentation"`` needs nothing else at inference; the set
     #: decoder, the query propagation and the stage-1 association are left untrained), a faster
-    #: step (BENCHMARKS.md). The shipped recipe trains them (true).
+    #: step (BENCHMARKS.md). The shipped checkpoint's stage 1 sets it false (its README).
     decoder: bool = True
     #: train the decoder, query propagation and association on cached BEVs of a frozen encoder
     #: taken from ``--init`` (``icmapper.training.bevcache``); the segmentation loss is off
@@ -91,7 +91,7 @@ class TrainConfig:
     amp: bool = True  # bf16 autocast of the training forward on a GPU
     #: the same on the CPU: 1.14-1.2x a stage-1 step on a CPU with native bf16 (AVX-512 BF16 /
     #: AMX); the losses of 2,250 steps and the AP of 3,000 as in float32 (BENCHMARKS.md); slower
-    #: on a CPU without it. Off in the shipped recipe, which trained in float32.
+    #: on a CPU without it. On in the shipped checkpoint's stage 1 (--set), off in its later steps.
     amp_cpu: bool = False
     log_every: int = 10
     ckpt_every: int = 200
