@@ -12,9 +12,8 @@ rasterised for all instances at once over the cells of their boxes.
 
 ``--seg-only``: the current step is ``stage1.decoder = false``'s (the encoder and the
 segmentation head on the segmentation loss alone; the set decoder, query propagation and
-stage-1 association, which segmentation-instance inference does not run, are not trained). It
-trains less of the network than the shipped recipe, so it is a recipe option measured, not the
-shipped step.
+stage-1 association, which segmentation-instance inference does not run, are not trained). With
+``--amp-cpu`` as well it is the step the shipped checkpoint's stage 1 trained with (its README).
 
 ``--amp-cpu``: the current step's forward runs under CPU bf16 autocast, as ``amp_cpu = true``
 trains (the former step stays float32); its numbers differ from float32's in rounding, so the
