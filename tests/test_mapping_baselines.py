@@ -91,19 +91,6 @@ def _sequence() -> tuple[Sequence, list[FrameGT]]:
     return seq, [_frame_gt(px) for px in STEPS]
 
 
-def _engine_ready() -> None:
-    """Skips when the native map store (and icmapper.geom) is not built yet."""
-    try:
-        import icmapper
-        import icmapper.geom  # noqa: F401
-
-        icmapper.GlobalMap()
-    except BaseException as e:  # a not-yet-implemented Rust store panics (BaseException)
-        if isinstance(e, (KeyboardInterrupt, SystemExit)):
-            raise
-        pytest.skip(f"native GlobalMap / icmapper.geom not available: {type(e).__name__}: {e}")
-
-
 def _dense(points: np.ndarray, closed: bool, step: float = 0.5) -> np.ndarray:
     p = np.concatenate([points, points[:1]]) if closed else points
     s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(p, axis=0), axis=1))])
@@ -186,7 +173,6 @@ def test_baseline_map_matches_ground_truth(name: str) -> None:
     map lies within 0.6 m (mean Chamfer, both directions) of the GT global map: a few times the
     jitter, well under half the 3.75 m lane spacing, so missing, misplaced or spurious instances
     fail. With exact detections the bound is 0.25 m (resampling, curve fit, ends)."""
-    _engine_ready()
     seq, gt = _sequence()
     for noise, bound in (("none", 0.25), ("low", 0.6)):
         gmap = _run(_make(name, OracleDetector(seq, noise=noise, seed=0, gt=gt)), seq)
@@ -200,7 +186,6 @@ def test_baseline_map_matches_ground_truth(name: str) -> None:
 def test_baseline_track_ids(name: str) -> None:
     """Online methods give every detection an id; with exact detections Post-Track's ids follow
     the GT ids one-to-one (no switches), and so the map has one instance per GT instance."""
-    _engine_ready()
     seq, gt = _sequence()
     method = _make(name, OracleDetector(seq, noise="none", gt=gt))
     method.reset()
@@ -234,7 +219,6 @@ class _ScriptedSource:
 
 @pytest.mark.parametrize("name", sorted(BASELINES))
 def test_baseline_empty_frames(name: str) -> None:
-    _engine_ready()
     seq, _ = _sequence()
     gmap = _run(_make(name, _ScriptedSource({})), seq)
     assert len(gmap) == 0
@@ -242,7 +226,6 @@ def test_baseline_empty_frames(name: str) -> None:
 
 @pytest.mark.parametrize("name", sorted(BASELINES))
 def test_baseline_rejects_nan_and_keeps_map(name: str) -> None:
-    _engine_ready()
     seq, gt = _sequence()
     oracle = OracleDetector(seq, noise="low", gt=gt)
     good = oracle.detect(seq.frame(1, with_images=False))
