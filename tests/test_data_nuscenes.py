@@ -88,8 +88,7 @@ def test_split_file(root: Path, tmp_path: Path) -> None:
 
 def test_shared_newsplit(shared_data: Path) -> None:
     path = shared_data / "splits" / "nuscenes_newsplit.json"
-    if not path.is_file():
-        pytest.skip(f"{path} not available")
+    assert path.is_file(), f"the shared data lacks {path}"
     train = nuscenes.read_split(path, "train")
     val = nuscenes.read_split(path, "val")
     assert len(train) == 698 and len(val) == 148 and not set(train) & set(val)

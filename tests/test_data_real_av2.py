@@ -27,16 +27,11 @@ def log(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 def _devkit():  # noqa: ANN202
-    from icmapper.testing.devkits import import_devkit
+    from icmapper.testing.devkits import require_devkit
 
-    try:
-        io_utils, pin, sdb = import_devkit(
-            "av2.utils.io",
-            "av2.geometry.camera.pinhole_camera",
-            "av2.utils.synchronization_database",
-        )
-    except ImportError as e:
-        pytest.skip(f"av2 devkit not installed: {e}")
+    io_utils, pin, sdb = require_devkit(
+        "av2.utils.io", "av2.geometry.camera.pinhole_camera", "av2.utils.synchronization_database"
+    )
     return io_utils, pin.PinholeCamera, sdb.SynchronizationDB
 
 
@@ -92,8 +87,7 @@ def test_reader_matches_devkit(log: Path) -> None:
 
 def test_reader_matches_devkit_with_real_calibration(shared_data: Path, tmp_path: Path) -> None:
     calib = shared_data / "av2-mini" / REAL_CALIB_LOG / "calibration"
-    if not calib.is_dir():
-        pytest.skip(f"no real calibration at {calib}")
+    assert calib.is_dir(), f"the shared data lacks the real calibration {calib}"
     log = write_av2_sensor_log(tmp_path, duration_s=1.0, calibration_from=calib)
     assert _check_against_devkit(log) < 0.5
 

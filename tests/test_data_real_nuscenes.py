@@ -26,14 +26,11 @@ def dataroot(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 @pytest.fixture(scope="module")
 def nusc(dataroot: Path):  # noqa: ANN201
-    from icmapper.testing.devkits import import_devkit
+    from icmapper.testing.devkits import require_devkit
 
-    try:
-        (devkit, _, _) = import_devkit(
-            "nuscenes.nuscenes", "nuscenes.utils.geometry_utils", "pyquaternion"
-        )
-    except ImportError as e:
-        pytest.skip(f"nuscenes-devkit not installed: {e}")
+    (devkit, _, _) = require_devkit(
+        "nuscenes.nuscenes", "nuscenes.utils.geometry_utils", "pyquaternion"
+    )
     return devkit.NuScenes(version="v1.0-mini", dataroot=str(dataroot), verbose=False)
 
 

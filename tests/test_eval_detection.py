@@ -34,7 +34,8 @@ def frame(ids, classes, pts, scores=None):
 
 
 def test_resample_matches_shapely() -> None:
-    shapely = pytest.importorskip("shapely")
+    import shapely
+
     rng = np.random.default_rng(0)
     pts = np.cumsum(rng.normal(size=(8, 20, 2)), axis=1)
     for closed in (False, True):
@@ -164,7 +165,6 @@ def test_id_change_on_same_gt_lowers_cmap() -> None:
 
 def test_matches_reference_implementation() -> None:
     """The vectorised AP equals the straightforward numpy + shapely reference on random data."""
-    pytest.importorskip("shapely")
     from benchmarks.evaluation import make_dataset, reference_ap
 
     pred, gt = make_dataset(num_seqs=3, num_frames=6, num_preds=30, half=(30.0, 15.0), seed=4)

@@ -7,10 +7,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import shapely
 from icmapper.eval.globalmap import gap_samples, global_metrics
 from scipy.spatial.distance import cdist
 
-shapely = pytest.importorskip("shapely")
 TH = (0.5, 1.0, 1.5)
 
 

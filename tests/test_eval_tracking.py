@@ -2,12 +2,11 @@
 
 from __future__ import annotations
 
+import motmetrics as mm
 import numpy as np
 import pytest
 from icmapper.eval.instances import from_frames
 from icmapper.eval.tracking import MotAccumulator, summarize, tracking_metrics
-
-mm = pytest.importorskip("motmetrics")
 
 
 def _reference(frames: list[tuple[np.ndarray, np.ndarray, np.ndarray]]) -> dict[str, float]:

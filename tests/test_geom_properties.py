@@ -14,13 +14,11 @@ from collections.abc import Iterator
 
 import numpy as np
 import pytest
-
-hypothesis = pytest.importorskip("hypothesis", reason="hypothesis (test extras) not installed")
-from hypothesis import HealthCheck, given, settings  # noqa: E402
-from hypothesis import strategies as st  # noqa: E402
-from hypothesis.extra import numpy as hnp  # noqa: E402
-from icmapper import geom  # noqa: E402
-from icmapper._icmap import GlobalMap  # noqa: E402
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+from hypothesis.extra import numpy as hnp
+from icmapper import geom
+from icmapper._icmap import GlobalMap
 
 EXAMPLES = int(os.environ.get("ICMAPPER_HYPOTHESIS_EXAMPLES", "150"))
 SETTINGS = settings(

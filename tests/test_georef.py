@@ -14,12 +14,9 @@ PTS = np.array([[0.0, 0.0], [1745.37, -1421.37], [250.5, 3100.25], [-800.0, 40.0
 
 
 def test_av2_cities_match_the_av2_devkit() -> None:
-    from icmapper.testing.devkits import import_devkit
+    from icmapper.testing.devkits import require_devkit
 
-    try:
-        (utm,) = import_devkit("av2.geometry.utm")
-    except ImportError as exc:
-        pytest.skip(f"av2 devkit (test extras) not importable: {exc}")
+    (utm,) = require_devkit("av2.geometry.utm")
     for code in AV2_CITIES:
         ref = utm.convert_city_coords_to_wgs84(PTS, utm.CityName(code))  # (n, 2) lat, lon
         got = geo_frame(code).to_lonlat(PTS)  # (n, 2) lon, lat
@@ -27,12 +24,9 @@ def test_av2_cities_match_the_av2_devkit() -> None:
 
 
 def test_nuscenes_maps_match_the_nuscenes_devkit() -> None:
-    from icmapper.testing.devkits import import_devkit
+    from icmapper.testing.devkits import require_devkit
 
-    try:
-        (ep,) = import_devkit("nuscenes.scripts.export_poses")
-    except ImportError as exc:
-        pytest.skip(f"nuscenes-devkit (test extras) not importable: {exc}")
+    (ep,) = require_devkit("nuscenes.scripts.export_poses")
     pos = np.abs(PTS[1:])  # the devkit's atan(x / y) holds in the map's positive quadrant
     for loc in NUSCENES_LOCATIONS:
         ref = ep.derive_latlon(loc, [{"timestamp": 0, "translation": [x, y, 0.0]} for x, y in pos])

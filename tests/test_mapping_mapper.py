@@ -474,8 +474,7 @@ AV2_LOG = "7fab2350-7eaf-3b7e-a39d-6937a4c1bede"
 def av2_low(shared_data: Path) -> dict[str, float]:
     """CD per class of the oracle-"low" map of one av2-mini log vs its global GT."""
     log = shared_data / "av2-mini" / AV2_LOG
-    if not log.is_dir():
-        pytest.skip(f"av2-mini log {log} not available")
+    assert log.is_dir(), f"the shared data lacks the av2-mini log {log}"
     seq = open_source(f"av2:{log}", render=False)[0]
     m = Mapper.with_oracle(seq, noise="low", seed=0)
     run(m, seq)
@@ -496,8 +495,7 @@ def test_av2_boundaries_seen_in_one_frame(shared_data: Path) -> None:
     the map, so the boundary CD is large (~7.6 m) although the detections are exact. With
     min_hits=1 every detected instance is mapped and the boundary CD meets the "low" bound."""
     log = shared_data / "av2-mini" / AV2_LOG
-    if not log.is_dir():
-        pytest.skip(f"av2-mini log {log} not available")
+    assert log.is_dir(), f"the shared data lacks the av2-mini log {log}"
     seq = open_source(f"av2:{log}", render=False)[0]
     m = Mapper.with_oracle(seq, noise="low", seed=0, config=MapperConfig(min_hits=1))
     run(m, seq)

@@ -145,7 +145,8 @@ def test_positional_affinity() -> None:
 
 
 def test_polyline_chamfer_matrix_against_shapely() -> None:
-    shapely = pytest.importorskip("shapely")
+    import shapely
+
     rng = np.random.default_rng(1)
     a = np.cumsum(rng.normal(size=(3, 6, 2)), axis=1)
     b = np.cumsum(rng.normal(size=(4, 5, 2)), axis=1)

@@ -37,3 +37,25 @@ def import_devkit(*modules: str) -> list[types.ModuleType]:
     finally:
         for name in added:
             sys.modules.pop(name, None)
+
+
+#: The distribution (pip name) that provides each top-level module the devkit oracles import.
+DISTRIBUTIONS = {"av2": "av2", "nuscenes": "nuscenes-devkit", "pyquaternion": "pyquaternion"}
+
+
+def require_devkit(*modules: str) -> list[types.ModuleType]:
+    """:func:`import_devkit` for a test: the modules, or the end of the test when one does not
+    import — a skip only where its devkit is not installed at all and ``CI`` is not true, a
+    failure otherwise (``icmapper.testing.required``)."""
+    from icmapper.testing.required import installed, missing
+
+    try:
+        return import_devkit(*modules)
+    except ImportError as exc:
+        top = (exc.name or "").split(".")[0]
+        if top in DISTRIBUTIONS:  # a devkit module itself: installed or not decides
+            dist = DISTRIBUTIONS[top]
+        else:  # a dependency of an installed devkit
+            named = sorted({m.split(".")[0] for m in modules} & set(DISTRIBUTIONS))
+            dist = next((DISTRIBUTIONS[n] for n in named if installed(DISTRIBUTIONS[n])), None)
+        missing(f"devkit modules {', '.join(modules)} do not import: {exc}", distribution=dist)
