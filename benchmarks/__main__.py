@@ -44,6 +44,10 @@ BENCHMARKS: dict[str, tuple[str, str]] = {
         "benchmarks.images",
         "real camera images: JPEG decode + resize frames/s by decoder and DataLoader workers",
     ),
+    "viewer": (
+        "benchmarks.viewer",
+        "HTML viewer frame time in headless Chromium on 10^4 and 10^5-instance maps",
+    ),
 }
 
 

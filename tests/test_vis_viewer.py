@@ -1,20 +1,24 @@
 """The HTML viewer (icmapper.vis.viewer): its data against the run, and the page in a real
-headless browser (Debian's chromium driven by Playwright; skipped with the reason where either is
-missing — scripts/test.sh installs both where it can)."""
+headless browser (Debian's chromium driven by Playwright; scripts/test.sh installs both where it
+can). Where either is missing the browser tests skip with the reason, except under CI=true, where
+they fail unless ICMAPPER_SKIP_BROWSER=1 opts out; a browser that is there but does not launch
+always fails. The frame time on large maps is measured by ``python -m benchmarks viewer``."""
 
 from __future__ import annotations
 
 import json
 import os
 import re
-import shutil
 from pathlib import Path
 
 import numpy as np
 import pytest
 from icmapper.data.types import CLASS_NAMES
-from icmapper.vis.replay import MapItem, load_map_items, open_replay
+from icmapper.testing.required import missing
+from icmapper.vis.replay import load_map_items, open_replay
 from icmapper.vis.viewer import map_viewer_data, nearest_gt_chamfer, viewer_data, write_viewer
+
+from benchmarks.viewer import big_map, find_chromium
 
 SOURCE = "sim:val:1"
 
@@ -133,17 +137,24 @@ def test_view_command_errors(tmp_path: Path, capsys: pytest.CaptureFixture[str])
 
 
 # ---------------------------------------------------------------------------- in a browser
+#: Set to 1 to skip the browser tests (also under CI=true, where a missing browser fails).
+OPT_OUT = "ICMAPPER_SKIP_BROWSER"
+
+
 def _chromium() -> str:
-    """The system's Chromium (ICMAPPER_CHROMIUM overrides), or a skip naming what is missing."""
+    """The system's Chromium (ICMAPPER_CHROMIUM overrides); a missing one ends the test as
+    ``icmapper.testing.required.missing`` says (a skip only outside CI)."""
+    if os.environ.get(OPT_OUT, "").strip() == "1":
+        pytest.skip(f"{OPT_OUT}=1: the browser tests are switched off")
     try:
         import playwright.sync_api  # noqa: F401
-    except ImportError:
-        pytest.skip("playwright is not installed (pip install playwright; see scripts/test.sh)")
-    exe = os.environ.get("ICMAPPER_CHROMIUM") or next(
-        (p for n in ("chromium", "chromium-browser") if (p := shutil.which(n))), None
-    )
+    except ImportError as exc:
+        missing(
+            f"playwright does not import ({exc}; see scripts/test.sh)", distribution="playwright"
+        )
+    exe = find_chromium()
     if not exe:
-        pytest.skip("no chromium executable (apt-get install chromium; see scripts/test.sh)")
+        missing("no chromium executable (apt-get install chromium; scripts/test.sh does)")
     return exe
 
 
@@ -153,10 +164,7 @@ def browser():  # noqa: ANN201
     from playwright.sync_api import sync_playwright
 
     with sync_playwright() as p:
-        try:
-            b = p.chromium.launch(executable_path=exe, args=["--no-sandbox"])
-        except Exception as exc:  # e.g. a Chromium too old for this Playwright
-            pytest.skip(f"cannot launch {exe} with Playwright: {str(exc).splitlines()[0]}")
+        b = p.chromium.launch(executable_path=exe, args=["--no-sandbox"])  # failing: the test fails
         yield b
         b.close()
 
@@ -246,51 +254,19 @@ def test_viewer_in_a_browser(browser, page_file: tuple[Path, dict], run_dir: Pat
     page.close()
 
 
-def _big_map(n: int, frames: int, seed: int = 0) -> list[MapItem]:
-    """n instances (a third each class) scattered over a square, first frames spread."""
-    rng = np.random.default_rng(seed)
-    side = float(np.sqrt(n)) * 40.0
-    items = []
-    for i in range(n):
-        c = i % 3
-        x0, y0 = rng.uniform(0.0, side, 2)
-        if c == 0:
-            a = np.linspace(0.0, 2 * np.pi, 13)[:-1]
-            pts = np.stack([x0 + 4 * np.cos(a), y0 + 2 * np.sin(a)], 1)  # (12, 2)
-        else:
-            s = np.arange(int(rng.integers(30, 80)), dtype=np.float64)
-            h = rng.uniform(0, 2 * np.pi)
-            pts = np.stack([x0 + s * np.cos(h) + 2 * np.sin(s / 15),
-                            y0 + s * np.sin(h) + 2 * np.cos(s / 13)], 1)  # fmt: skip
-        first = int(rng.integers(0, frames))
-        items.append(MapItem(i, c, pts, c == 0, first, min(frames - 1, first + 5), 3))
-    return items
-
-
-def test_ten_thousand_instances_stay_smooth(
-    browser,  # noqa: ANN001
-    tmp_path: Path,
-    record_property: pytest.RecordProperty,
-) -> None:
-    """10^4 instances: every one drawn, and the frame time while panning, zooming and moving the
-    slider every animation frame (printed; the bound is loose: 2 shared cores, software
-    rendering)."""
-    items = _big_map(10_000, 200)
+def test_ten_thousand_instances_are_all_drawn(browser, tmp_path: Path) -> None:  # noqa: ANN001
+    """10^4 instances: every one drawn at the last frame, the animation that pans, zooms and
+    moves the slider every frame runs without errors, and the slider at frame 0 draws exactly the
+    instances first seen there. (Their frame time: ``python -m benchmarks viewer``.)"""
+    items = big_map(10_000, 200)
     path = write_viewer(map_viewer_data(items, "10^4 instances"), tmp_path / "big.html")
     page, errors = _open(browser, path)
     assert page.evaluate("icmapperViewer.drawn") == _per_class([m.cls for m in items])
-    whole = page.evaluate("icmapperViewer.measure(60)")
     page.evaluate("icmapperViewer.zoom(8)")
-    zoomed = page.evaluate("icmapperViewer.measure(60)")
-    print(f"\n10^4 instances, frame time: whole map {whole}; zoomed x8 {zoomed}")
-    record_property("frame_ms_whole_map", whole)
-    record_property("frame_ms_zoomed", zoomed)
-    assert whole["frames"] == 60 and zoomed["frames"] == 60
-    assert whole["medianMs"] < 100 and zoomed["medianMs"] < 100
+    assert page.evaluate("icmapperViewer.measure(10)")["frames"] == 10
     page.locator("#frame").fill("0")
-    assert sum(page.evaluate("icmapperViewer.drawn").values()) == sum(
-        m.first_frame == 0 for m in items
+    assert page.evaluate("icmapperViewer.drawn") == _per_class(
+        [m.cls for m in items if m.first_frame == 0]
     )
-    page.screenshot(path=str(tmp_path / "big.png"))
     assert errors == []
     page.close()
