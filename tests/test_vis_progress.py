@@ -42,11 +42,42 @@ def test_not_a_tty_gives_few_plain_lines(monkeypatch: pytest.MonkeyPatch) -> Non
     assert lines[-1].endswith("[item 999]")
 
 
-def test_lines_are_rate_limited_by_time(monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.delenv("ICMAPPER_PROGRESS", raising=False)
+class _Clock:
+    """A clock the test moves: seconds = ``t``."""
+
+    def __init__(self) -> None:
+        self.t = 0.0
+
+    def __call__(self) -> float:
+        return self.t
+
+
+def test_lines_are_rate_limited_by_time() -> None:
+    """With an injected clock (no dependence on the machine's speed): one item per 10 ms, so a
+    tenth of the work every second, and lines at most every 4.5 s: the tenths at 1 s and 6 s."""
+    out, clock = io.StringIO(), _Clock()
+    bar = LineProgress(1000, "x", stream=out, min_interval=4.5, clock=clock)
+    for i in range(1000):
+        clock.t = (i + 1) / 100
+        bar.update(1)
+    bar.close()
+    lines = out.getvalue().splitlines()
+    assert [ln.split(",")[0] for ln in lines] == [
+        "x: started",
+        "x: 100/1000 it (10%)",
+        "x: 600/1000 it (60%)",
+        "x: done",
+    ]
+    assert lines[1].endswith("1.0 s, 100.00 it/s") and lines[2].endswith("6.0 s, 100.00 it/s")
+    assert lines[-1] == "x: done, 1000/1000 it in 10.0 s, 100.00 it/s"
+
+
+def test_a_clock_that_stands_still_gives_one_intermediate_line() -> None:
+    """All the work within one instant (a fast loop): only the first tenth is printed."""
     out = io.StringIO()
-    _drive(progress(10_000, "x", stream=out), 10_000)  # fast loop: min_interval suppresses
-    assert len(out.getvalue().splitlines()) <= 3
+    _drive(LineProgress(10_000, "x", stream=out, clock=_Clock()), 10_000)
+    lines = out.getvalue().splitlines()
+    assert len(lines) == 3 and lines[1].startswith("x: 1000/10000 it (10%)"), lines
 
 
 def test_a_tty_gets_a_tqdm_bar(monkeypatch: pytest.MonkeyPatch) -> None:

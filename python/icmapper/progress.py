@@ -14,6 +14,7 @@ from __future__ import annotations
 import os
 import sys
 import time
+from collections.abc import Callable
 from typing import IO, Any
 
 #: Environment variable that overrides the automatic choice ("bar", "lines", "off").
@@ -26,6 +27,7 @@ class LineProgress:
 
     The same small interface as a tqdm bar (``update``, ``set_postfix_str``, ``set_postfix``,
     ``close``, a context manager), so call sites do not care which one they hold.
+    ``clock`` (seconds, monotonic) times the rate limit and the rates; tests inject their own.
     """
 
     def __init__(
@@ -37,6 +39,7 @@ class LineProgress:
         stream: IO[str] | None = None,
         steps: int = 10,
         min_interval: float = 5.0,
+        clock: Callable[[], float] = time.perf_counter,
     ) -> None:
         self.total = None if total is None else int(total)
         self.desc, self.unit = desc, unit
@@ -46,7 +49,8 @@ class LineProgress:
         self.steps = max(1, int(steps))
         self.min_interval = float(min_interval)
         self.postfix = ""
-        self._t0 = time.perf_counter()
+        self._clock = clock
+        self._t0 = clock()
         self._last_t = -float("inf")
         self._next_mark = self._mark_after(self.n)
         self._closed = False
@@ -64,7 +68,7 @@ class LineProgress:
         print(text, file=self.stream, flush=True)
 
     def _rate(self) -> str:
-        dt = time.perf_counter() - self._t0
+        dt = self._clock() - self._t0
         done = self.n - self._start_n
         rate = done / dt if dt > 0 else 0.0
         return f"{dt:.1f} s, {rate:.2f} {self.unit}/s"
@@ -74,7 +78,7 @@ class LineProgress:
         if self.total is None or self.n < self._next_mark or self.n >= self.total:
             return
         self._next_mark = self._mark_after(self.n)
-        now = time.perf_counter()
+        now = self._clock()
         if now - self._last_t < self.min_interval:
             return
         self._last_t = now
