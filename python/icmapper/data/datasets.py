@@ -22,8 +22,6 @@ re-rendered. Use one cache_dir per image size / rig / renderer seed.
 
 from __future__ import annotations
 
-import os
-import tempfile
 from pathlib import Path
 from typing import Any
 
@@ -32,6 +30,7 @@ import torch
 from numpy.typing import NDArray
 from torch.utils.data import Dataset
 
+from icmapper.atomic import atomic_open
 from icmapper.data.gt import sequence_gt
 from icmapper.data.types import FrameGT, PerceptionRange, RANGE_60x30, Sequence
 
@@ -67,14 +66,8 @@ class ImageCache:
                 pass  # corrupt entry: re-render below and overwrite it
         arr = _render(seq, i)
         path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=".tmp-", suffix=".npy")
-        try:
-            with os.fdopen(fd, "wb") as f:
-                np.save(f, arr, allow_pickle=False)
-            os.replace(tmp, path)
-        except BaseException:
-            Path(tmp).unlink(missing_ok=True)
-            raise
+        with atomic_open(path, "wb") as f:
+            np.save(f, arr, allow_pickle=False)
         return arr
 
     def fill(

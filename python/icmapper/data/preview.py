@@ -5,13 +5,13 @@ them (crossings blue, dividers orange, boundaries green, ids labelled). Writes a
 from __future__ import annotations
 
 import os
-import tempfile
 import warnings
 from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
 
+from icmapper.atomic import atomic_path
 from icmapper.data.types import MapClass, PerceptionRange, RANGE_60x30, Sequence, world_to_ego
 
 CLASS_COLOURS = {
@@ -131,13 +131,9 @@ def preview_png(
     ax.legend(handles=handles, fontsize=6, loc="lower right")
     out = Path(out_path)
     out.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(suffix=".png", dir=out.parent)
-    os.close(fd)
     try:
-        fig.savefig(tmp, format="png")
-        os.replace(tmp, out)
+        with atomic_path(out) as tmp:
+            fig.savefig(tmp, format="png")
     finally:
         plt.close(fig)
-        if os.path.exists(tmp):
-            os.unlink(tmp)
     return out

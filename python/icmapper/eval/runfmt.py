@@ -19,7 +19,6 @@ from __future__ import annotations
 import json
 import os
 import re
-import tempfile
 import zipfile
 from dataclasses import dataclass
 from pathlib import Path
@@ -27,6 +26,8 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
+
+from icmapper.atomic import atomic_path
 
 FORMAT_NAME = "icmapper-run"
 FORMAT_VERSION = 1
@@ -114,15 +115,9 @@ class Run:
 
 
 def _atomic_write(path: Path, write: Any) -> None:
-    """Calls write(tmp_path) then renames the temp file onto path."""
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    os.close(fd)
-    try:
-        write(Path(tmp))
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    """Calls write(tmp_path) then renames the temp file onto path (``icmapper.atomic``)."""
+    with atomic_path(path) as tmp:
+        write(tmp)
 
 
 def _check_frame(fp: FramePredictions, where: str) -> FramePredictions:

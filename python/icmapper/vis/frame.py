@@ -17,13 +17,13 @@ Drawn with Pillow (the BEV panels supersampled for smooth lines). No I/O except 
 from __future__ import annotations
 
 import os
-import tempfile
 from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
 from PIL import Image, ImageDraw
 
+from icmapper.atomic import atomic_path
 from icmapper.data.types import CLASS_NAMES, PerceptionRange, world_to_ego
 from icmapper.vis.overlay import (
     Overlay,
@@ -293,15 +293,8 @@ def write_png(img: Image.Image, path: str | os.PathLike) -> Path:
     """Writes ``img`` to ``path`` atomically (PNG); returns the path."""
     out = Path(path)
     out.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(suffix=".png", dir=out.parent)
-    os.close(fd)
-    try:
+    with atomic_path(out) as tmp:
         img.save(tmp, format="PNG", optimize=True)
-        os.chmod(tmp, 0o644)  # a shareable file, not mkstemp's 0600
-        os.replace(tmp, out)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
     return out
 
 

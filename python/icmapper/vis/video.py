@@ -9,7 +9,6 @@ picture background. When either is missing, or for a ``.gif`` path, Pillow write
 from __future__ import annotations
 
 import os
-import tempfile
 import warnings
 from collections.abc import Iterable
 from pathlib import Path
@@ -17,6 +16,7 @@ from pathlib import Path
 import numpy as np
 from PIL import Image
 
+from icmapper.atomic import atomic_path
 from icmapper.vis.style import BACKGROUND_RGB
 
 #: Container suffixes written through imageio-ffmpeg.
@@ -64,17 +64,11 @@ def write_video(frames: Iterable[Image.Image], path: str | os.PathLike, fps: flo
         )
         out, suffix = out.with_suffix(".gif"), ".gif"
     out.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(suffix=suffix, dir=out.parent)
-    os.close(fd)
-    try:
-        n = _write_gif(frames, tmp, fps) if suffix == ".gif" else _write_ffmpeg(frames, tmp, fps)
+    with atomic_path(out) as tmp:
+        write = _write_gif if suffix == ".gif" else _write_ffmpeg
+        n = write(frames, str(tmp), fps)
         if n == 0:
             raise ValueError("no frames to write")
-        os.chmod(tmp, 0o644)  # a shareable file, not mkstemp's 0600
-        os.replace(tmp, out)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
     return out
 
 

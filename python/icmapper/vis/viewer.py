@@ -23,7 +23,6 @@ import io
 import json
 import math
 import os
-import tempfile
 from importlib import resources
 from pathlib import Path
 from typing import Any
@@ -31,6 +30,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from icmapper.atomic import write_text_atomic
 from icmapper.data.types import CLASS_NAMES, ego_to_world, pose_to_xy_yaw
 from icmapper.vis.replay import MapItem, RunReplay
 from icmapper.vis.style import CLASS_HEX
@@ -283,13 +283,5 @@ def write_viewer(data: dict[str, Any], path: str | os.PathLike) -> Path:
     out = Path(path)
     out.parent.mkdir(parents=True, exist_ok=True)
     text = render_html(data)
-    fd, tmp = tempfile.mkstemp(suffix=".html", dir=out.parent)
-    os.close(fd)
-    try:
-        Path(tmp).write_text(text, encoding="utf-8")
-        os.chmod(tmp, 0o644)  # a shareable file, not mkstemp's 0600
-        os.replace(tmp, out)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
+    write_text_atomic(out, text)
     return out
