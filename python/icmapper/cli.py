@@ -32,10 +32,13 @@ BENCH_MOVED = (
 
 
 def build_parser() -> argparse.ArgumentParser:
+    from icmapper import __version__
+
     parser = argparse.ArgumentParser(
         prog="icmapper",
         description="Online vectorised HD-map construction (IC-Mapper).",
     )
+    parser.add_argument("--version", action="version", version=f"icmapper {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for name in _COMMAND_MODULES:
         try:

@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -34,17 +35,35 @@ def add_city_arguments(p: argparse.ArgumentParser) -> None:
     g.add_argument("--ray-address", default=None, help="join this Ray cluster (default: local)")
 
 
+def workers_note(workers: int, city: bool) -> str | None:
+    """What to say about ``--workers`` when it cannot take effect (None when it does): outside a
+    city run it has no drives to spread; without Ray the drives run in-process."""
+    from icmapper.city.ray_backend import INSTALL_HINT, ray_available
+
+    if not workers:
+        return None
+    if not city:
+        hint = "" if ray_available() else f" ({INSTALL_HINT})"
+        return (
+            f"note: --workers {workers} spreads the drives of a city run (--city) over Ray "
+            f"workers; this run maps in-process{hint}"
+        )
+    if not ray_available():
+        return f"note: {INSTALL_HINT}; mapping the drives in-process, one after another"
+    return None
+
+
 def cmd_city(args: argparse.Namespace, config: Any, image_size: tuple[int, int]) -> int:
     from icmapper.city.drives import CitySettings
     from icmapper.city.evaluate import city_table, evaluate_city
-    from icmapper.city.ray_backend import INSTALL_HINT, ray_available
     from icmapper.city.run import build_city
     from icmapper.mapping.run import DetectionInput
 
     if args.detections.startswith("file:") and len(args.source) != 1:
         raise ValueError("a city run from a prediction file takes one --source")
-    if args.workers and not ray_available():
-        print(f"note: {INSTALL_HINT}; mapping the drives in-process")
+    note = workers_note(args.workers, city=True)
+    if note is not None:
+        print(note, file=sys.stderr)
         args.workers = 0
     inp = DetectionInput.parse(args.detections, args.checkpoint, args.device, args.seed)
     settings = CitySettings(

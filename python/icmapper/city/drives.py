@@ -80,6 +80,7 @@ class DriveMapper:
                 render=self.inp.needs_images,
             )
             self.inp.match(spec, seqs)  # a prediction file's frames against the source's
+            self.inp.note_image_domain(seqs)
             self._sources[spec] = {s.name: s for s in seqs}
         by_name = self._sources[spec]
         if name not in by_name:

@@ -87,8 +87,10 @@ def build_city(
     local instance, or the cluster at ``ray_address``); 0 runs them in-process. Returns the
     manifest."""
     from icmapper._icmap import GlobalMap
+    from icmapper.data.sources import resolve_spec
     from icmapper.mapping.config import MapperConfig
 
+    specs = [resolve_spec(s) for s in specs]  # the manifest names the data from anywhere
     cfg = MapperConfig.from_dict(settings.config)
     gate, min_overlap, tol = cfg.city_gate, cfg.city_min_overlap, cfg.city_tolerance
     if mode not in MODES:

@@ -27,17 +27,19 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--sequence", type=int, default=0, help="with --source: which sequence")
     p.add_argument("--city", type=int, default=10_003, help="city seed (val: 10000-10099)")
     p.add_argument("--drive", type=int, default=0, help="drive seed")
-    p.add_argument("--frame", type=int, default=10, help="frame index")
+    p.add_argument("--frame", type=int, default=10, help="frame index (0 to the length - 1)")
     p.add_argument("--range", default="60x30", help="BEV perception range, e.g. 60x30 or 100x50")
     p.add_argument("--image-size", type=int, nargs=2, default=(128, 352), metavar=("H", "W"))
-    p.add_argument("--out", required=True, help="output PNG path")
+    p.add_argument("--out", required=True, help="output PNG path (in an existing folder)")
     p.set_defaults(func=_preview)
     scenes.set_defaults(func=lambda args: (scenes.print_help(), 2)[1])
 
 
 def _preview(args: argparse.Namespace) -> int:
+    from icmapper.cliargs import check_frame, output_file
     from icmapper.data.preview import preview_png
 
+    out_path = output_file(args.out, "--out")
     size = (int(args.image_size[0]), int(args.image_size[1]))
     if args.source is None:
         from icmapper.data.sim import sim_sequence
@@ -52,6 +54,7 @@ def _preview(args: argparse.Namespace) -> int:
                 f"--sequence {args.sequence}: {args.source} has {len(seqs)} sequence(s)"
             )
         seq = seqs[args.sequence]
-    out = preview_png(seq, args.frame, args.out, PerceptionRange.from_name(args.range))
+    check_frame(args.frame, len(seq), what=f"sequence {seq.name}")
+    out = preview_png(seq, args.frame, out_path, PerceptionRange.from_name(args.range))
     print(f"wrote {out} ({seq.name}, frame {args.frame} of {len(seq)})")
     return 0

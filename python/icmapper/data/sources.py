@@ -112,13 +112,15 @@ def split_options(spec: str) -> tuple[str, dict[str, str]]:
 class SourceKind:
     """One kind of source spec ("KIND:REST"): ``usage`` and ``help`` for errors and the command
     line; ``open(spec, rest, options)`` returns the sequences; ``path_tag``: the spec names a
-    path on disk (run folders are named after its last component)."""
+    path on disk (run folders are named after its last component); ``real_images``: its
+    sequences may carry a camera's own images (not rendered ones)."""
 
     name: str
     usage: str
     help: str
     open: Callable[[str, str, SourceOptions], list[Sequence]]
     path_tag: bool = False
+    real_images: bool = False
 
 
 #: Registered source kinds by name (``register_source``), in registration order.
@@ -171,6 +173,37 @@ def open_source(
             f"bad source spec {spec!r}: unknown kind {name!r} ({', '.join(SOURCE_KINDS)})"
         )
     return kind.open(spec, rest, SourceOptions(image_size, seed, split_file, render, mode))
+
+
+def resolve_spec(spec: str) -> str:
+    """The spec with its path made absolute, so that it names the same data from any working
+    folder (what run folders and city manifests store): ``av2:../data:val:images=real`` ->
+    ``av2:/abs/data:val:images=real``. The path is the longest ':'-separated head of the rest
+    that exists on disk; specs of kinds without a path, or whose path does not exist, come back
+    unchanged (opening them reports the problem)."""
+    base, _ = split_options(spec)
+    name, sep, rest = base.partition(":")
+    kind = SOURCE_KINDS.get(name)
+    if not sep or kind is None or not kind.path_tag or not rest:
+        return spec
+    parts = rest.split(":")
+    for k in range(len(parts), 0, -1):
+        head = ":".join(parts[:k])
+        if Path(head).exists():
+            tail = rest[len(head) :] + spec[len(base) :]
+            return f"{name}:{Path(head).resolve()}{tail}"
+    return spec
+
+
+def may_have_real_images(spec: str) -> bool:
+    """Whether a spec (or several joined by " + ", as a training config's ``data.source``) can
+    give real camera images: a kind that reads them, not forced to ``images=render``."""
+    for one in spec.split(" + "):
+        base, opts = split_options(one.strip())
+        kind = SOURCE_KINDS.get(base.partition(":")[0])
+        if kind is not None and kind.real_images and opts.get("images") != "render":
+            return True
+    return False
 
 
 def source_tag(spec: str) -> str:
@@ -334,7 +367,8 @@ register_source(
         "av2:PATH[:split]",
         "an Argoverse 2 log, or every log in a folder (a split needs a split file)",
         _open_av2,
-        True,
+        path_tag=True,
+        real_images=True,
     )
 )
 register_source(
@@ -352,6 +386,7 @@ register_source(
         "nuscenes:PATH[:split]",
         "the scenes of a nuScenes dataroot (a split needs a split file)",
         _open_nuscenes,
-        True,
+        path_tag=True,
+        real_images=True,
     )
 )

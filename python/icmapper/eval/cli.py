@@ -38,9 +38,12 @@ def write_json(path: str | os.PathLike, results: list[dict]) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from icmapper.city.manifest import is_city_run
+    from icmapper.cliargs import output_file
     from icmapper.eval.evaluate import evaluate_predictions, evaluate_run
     from icmapper.eval.report import markdown
 
+    if args.json:
+        output_file(args.json, "--json")  # before the work, not after it
     mt = args.cmap in ("maptracker", "both")
     results = []
     for d in args.runs:
@@ -86,7 +89,9 @@ def register(subparsers: Any) -> None:
         help="C-mAP definition in Table 1: icmapper's (the method's track ids, default), "
         "MapTracker's (ids re-derived from the predictions, score > 0.4; docs/eval.md) or both",
     )
-    p.add_argument("--json", metavar="PATH", help="also write the numbers as JSON")
+    p.add_argument(
+        "--json", metavar="PATH", help="also write the numbers as JSON (in an existing folder)"
+    )
     p.add_argument(
         "--score-threshold",
         type=float,

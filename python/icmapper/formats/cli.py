@@ -9,9 +9,12 @@ from typing import Any
 
 
 def run(args: argparse.Namespace) -> int:
+    from icmapper.cliargs import output_file
     from icmapper.formats.export import export_run
 
     out = Path(args.out) if args.out else Path(args.run_dir) / f"predictions.{args.format}.json"
+    if args.out:
+        output_file(out, "--out")
     path = export_run(args.run_dir, out, args.format)
     print(f"wrote {path}")
     return 0
@@ -28,7 +31,10 @@ def register(subparsers: Any) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter,
         description="Writes the per-frame predictions of a run folder (icmapper map / compare) "
         "in a prediction file format; frames are named by the source's tokens (docs/eval.md).",
-        epilog="formats:\n" + formats_help(),
+        epilog="formats it writes (--format):\n"
+        + formats_help(writable=True)
+        + "\n\nread only (input of `map --detections file:PATH:FORMAT` and `eval`):\n"
+        + formats_help(writable=False),
     )
     p.add_argument("run_dir", metavar="RUN_DIR", help="a run folder")
     p.add_argument("--format", default="icmapper", choices=writable)

@@ -58,9 +58,14 @@ def get_format(name: str) -> PredictionFormat:
     return known[name]
 
 
-def formats_help() -> str:
-    """One line per registered format (for the command line)."""
-    return "\n".join(f"  {n:<14} {f.help}" for n, f in formats().items())
+def formats_help(writable: bool | None = None) -> str:
+    """One line per registered format (for the command line); ``writable`` True / False: only
+    the formats icmapper can / cannot write."""
+    return "\n".join(
+        f"  {n:<14} {f.help}"
+        for n, f in formats().items()
+        if writable is None or (f.write is not None) == writable
+    )
 
 
 def load_json(path: str | Path) -> Any:

@@ -12,7 +12,8 @@ As ``BaseMapDataset.format_results`` writes it (yuantianyuan01/StreamMapNet at 4
                          "track_vectors", "track_scores", "track_labels": ...}}}  # MapTracker;
                                                            # ignored
 TOKEN: the nuScenes sample token, or the Argoverse 2 lidar timestamp in nanoseconds as a string
-(both repositories' converters). Crossings are closed rings (first point repeated). The file has
+(both repositories' converters). Every vector has 20 points; crossings are closed rings, their
+20th point repeating the first (``closed_ring``). The file has
 no poses, no track ids and no query features; its range is not recorded (60x30 unless
 ``file:PATH:streammapnet:100x50``).
 """
@@ -32,6 +33,7 @@ from icmapper.formats.types import (
     PredictionSet,
     frame_arrays,
     instance_points,
+    ring_without_points,
 )
 
 NAME = "streammapnet"
@@ -87,15 +89,19 @@ def read(path: str, data: Any, range_name: str | None) -> PredictionSet:
 
 
 def closed_ring(points: np.ndarray) -> np.ndarray:
-    """A crossing (n, 2) ring -> (n + 1, 2) closed ring, the first point repeated at the end:
-    the closed LineString their tools interpolate along (their evaluators take vectors of any
-    length), and read back exactly."""
-    return np.concatenate([points, points[:1]]).astype(np.float64)
+    """A crossing ring (n, 2) -> (n, 2) as StreamMapNet's own results hold it: n - 1 points of
+    the ring, then the first point again (they sample a polygon with ``np.linspace(0, length,
+    n)`` along its closed exterior, so the last sample is the first). The point that shapes the
+    ring least is left out (``ring_without_points``); reading the file back keeps the n - 1 and
+    inserts one on the longest edge (``instance_points``), so the shape survives the trip."""
+    ring = ring_without_points(points, points.shape[0] - 1)  # (n - 1, 2)
+    return np.concatenate([ring, ring[:1]])  # (n, 2)
 
 
 def write(path: Path, preds: PredictionSet) -> None:
     """Writes ``preds`` as a submission file: one entry per frame token (every frame needs one);
-    crossings as closed rings of 21 points (``closed_ring``)."""
+    every vector has 20 points, crossings as closed rings whose last point repeats the first
+    (``closed_ring``)."""
     results: dict[str, Any] = {}
     for f in preds.frames:
         if f.token is None:

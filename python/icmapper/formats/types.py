@@ -101,8 +101,10 @@ def instance_points(raw: object, cls: int, where: str) -> NDArray[np.float32]:
 
     Exactly 20 points are kept as given (a network's output is not evenly spaced; resampling it
     would change what a method sees). A crossing whose last point repeats its first (StreamMapNet,
-    MapTracker, MapTR store rings closed) loses the repeat; any other count is resampled to 20
-    points evenly spaced by arc length (crossings along the closed contour). NaN, inf, fewer than
+    MapTracker, MapTR store rings closed) loses the repeat; a crossing left with fewer than 20
+    points keeps them all and gains the middles of its longest edges (the ring's shape unchanged:
+    StreamMapNet's 20 points with the first repeated read back as the 19 given and one more);
+    any other count is resampled to 20 points evenly spaced by arc length. NaN, inf, fewer than
     2 points or a bad shape raise PredictionFileError naming ``where``.
     """
     from icmapper import geom
@@ -124,6 +126,8 @@ def instance_points(raw: object, cls: int, where: str) -> NDArray[np.float32]:
         pts = pts[:-1]
     if pts.shape[0] == NUM_INSTANCE_POINTS:
         return pts.astype(np.float32)
+    if closed and pts.shape[0] > 2 and pts.shape[0] < NUM_INSTANCE_POINTS:
+        return ring_with_points(pts, NUM_INSTANCE_POINTS).astype(np.float32)
     moves = np.any(pts[1:] != pts[:-1])
     if not moves:
         return np.repeat(pts[:1], NUM_INSTANCE_POINTS, axis=0).astype(np.float32)
@@ -132,6 +136,30 @@ def instance_points(raw: object, cls: int, where: str) -> NDArray[np.float32]:
     except ValueError as exc:
         raise PredictionFileError(f"{where}: cannot resample the points ({exc})") from None
     return out.astype(np.float32)
+
+
+def ring_with_points(ring: NDArray[np.floating], n: int) -> NDArray[np.float64]:
+    """A closed ring (m, 2), m <= n, with the middle of its longest edge inserted until it has
+    ``n`` points: every given point kept, the shape unchanged."""
+    pts = [np.asarray(p, np.float64) for p in ring]
+    while len(pts) < n:
+        edges = [np.hypot(*(pts[(i + 1) % len(pts)] - pts[i])) for i in range(len(pts))]
+        i = int(np.argmax(edges))
+        pts.insert(i + 1, (pts[i] + pts[(i + 1) % len(pts)]) / 2)
+    return np.stack(pts)  # (n, 2)
+
+
+def ring_without_points(ring: NDArray[np.floating], n: int) -> NDArray[np.float64]:
+    """A closed ring (m, 2), m >= n >= 3, with the points that shape it least removed until ``n``
+    remain (each time the vertex spanning the smallest triangle with its neighbours,
+    Visvalingam-Whyatt): corners are kept, points along a straight edge go first."""
+    pts = np.asarray(ring, np.float64)
+    while len(pts) > n:
+        prev, nxt = np.roll(pts, 1, axis=0), np.roll(pts, -1, axis=0)  # (m, 2) each
+        u, v = pts - prev, nxt - prev  # (m, 2) each
+        area = np.abs(u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0])  # (m,) twice the triangle areas
+        pts = np.delete(pts, int(np.argmin(area)), axis=0)
+    return pts
 
 
 def frame_arrays(

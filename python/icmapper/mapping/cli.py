@@ -12,7 +12,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from icmapper.atomic import write_text_atomic
-from icmapper.data.sources import source_tag
+from icmapper.data.sources import resolve_spec, source_tag
 
 if TYPE_CHECKING:
     from icmapper.mapping.config import MapperConfig
@@ -89,15 +89,13 @@ def run_methods(
         raise ValueError(f"source {source!r} has no sequences")
     inp.match(source, seqs)  # a prediction file's frames against the source's
     factories = {m: method_factory(m, inp, rng, config) for m in methods}
-    out.mkdir(parents=True, exist_ok=True)
-    run_dirs = []
-    writers = {}
-    for m in methods:
-        d = out / m
+    run_dirs = [out / m for m in methods]
+    for d in run_dirs:
         if (d / "run.json").exists():
             raise FileExistsError(f"{d} already holds a run; choose another --out or remove it")
-        writers[m] = RunWriter(d, m, source, rng)
-        run_dirs.append(d)
+    inp.note_image_domain(seqs)
+    stored = resolve_spec(source)  # run.json names the data from any working folder
+    writers = {m: RunWriter(d, m, stored, rng) for m, d in zip(methods, run_dirs, strict=True)}
     total = sum(len(s) for s in seqs) * len(methods)
     bar = progress_bar(total, f"mapping {source}", unit="frame", enabled=progress)
     timings: dict[str, float] = {m: 0.0 for m in methods}
@@ -141,14 +139,22 @@ def range_of_detections(inp: Any) -> Any:
 
 
 def cmd_map(args: argparse.Namespace) -> int:
+    from icmapper.city.cli import workers_note
+    from icmapper.cliargs import output_folder
+
     if args.city:
+        output_folder(args.city, "--city")
         from icmapper.city.cli import cmd_city
 
         return cmd_city(args, mapper_config(args), _image_size(args))
     if len(args.source) != 1:
         raise ValueError("map takes one --source (several only with --city)")
+    note = workers_note(args.workers, city=False)
+    if note is not None:
+        print(note, file=sys.stderr)
     if not args.out:
         raise ValueError("map needs --out (or --city for a city run)")
+    output_folder(args.out, "--out")
     run_methods(
         [args.method],
         args.source[0],
@@ -166,6 +172,7 @@ def cmd_map(args: argparse.Namespace) -> int:
 
 
 def cmd_compare(args: argparse.Namespace) -> int:
+    from icmapper.cliargs import output_folder
     from icmapper.eval.cli import write_json
     from icmapper.eval.evaluate import evaluate_run
     from icmapper.eval.report import markdown
@@ -175,7 +182,7 @@ def cmd_compare(args: argparse.Namespace) -> int:
     for m in methods:
         method(m)  # ValueError naming the known methods
     config = mapper_config(args)
-    out = Path(args.out)
+    out = output_folder(args.out, "--out")
     report = []
     all_results = []
     for source in args.source:
@@ -233,10 +240,23 @@ def _common(p: argparse.ArgumentParser, required_out: bool = True) -> None:
         help="training checkpoint (default: icmapper.checkpoints.DEFAULT_CHECKPOINT)",
     )
     p.add_argument("--out", required=required_out, help="output folder")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--device", default="cpu")
-    p.add_argument("--image-size", type=int, nargs=2, metavar=("H", "W"))
-    p.add_argument("--no-progress", action="store_true")
+    p.add_argument(
+        "--seed",
+        type=int,
+        default=0,
+        help="seed of the synthetic drives' rendering and of the oracle's noise (default 0)",
+    )
+    p.add_argument(
+        "--device", default="cpu", help="torch device of the learned networks (cpu, cuda, ...)"
+    )
+    p.add_argument(
+        "--image-size",
+        type=int,
+        nargs=2,
+        metavar=("H", "W"),
+        help="camera image size (default: the checkpoint's with --detections learned, else 64 176)",
+    )
+    p.add_argument("--no-progress", action="store_true", help="no progress bar or lines")
     from icmapper.mapping.config import CLI_FLAGS, MapperConfig
 
     helps = MapperConfig.help()
@@ -282,7 +302,13 @@ def register(subparsers: Any) -> None:
         required=True,
         help="a source spec (listed below); repeatable with --city",
     )
-    p.add_argument("--method", default="icmapper", choices=list(known), metavar="METHOD")
+    p.add_argument(
+        "--method",
+        default="icmapper",
+        choices=list(known),
+        metavar="METHOD",
+        help="the mapping method (default icmapper; the methods are listed below)",
+    )
     _common(p, required_out=False)
     from icmapper.city.cli import add_city_arguments
 

@@ -74,6 +74,14 @@ class NetworkUnits:
         return self.inner.detect(frame)
 
 
+#: Where to read how to train for real camera images (the image-domain note).
+REAL_DATA_RECIPE = (
+    'README.md, "On a nuScenes or Argoverse 2 download" (configs/nuscenes_newsplit.toml, '
+    "configs/av2_newsplit.toml)"
+)
+#: Checkpoints whose image-domain note was printed in this process (printed once each).
+_DOMAIN_NOTED: set[str] = set()
+
 #: ``--detections`` forms, for help and errors.
 DETECTIONS_USAGE = "'learned', 'oracle[:PRESET]' or 'file:PATH[:FORMAT][:RANGE]'"
 
@@ -113,7 +121,10 @@ class DetectionInput:
                 raise OSError(f"checkpoint {checkpoint} does not exist")
             return DetectionInput(checkpoint=checkpoint, device=device, seed=seed)
         if detections == "oracle" or detections.startswith("oracle:"):
+            from icmapper.mapping.oracle import OracleNoise
+
             preset = detections.split(":", 1)[1] if ":" in detections else "low"
+            OracleNoise.preset(preset)  # ValueError naming the presets, before any work
             return DetectionInput(oracle_noise=preset, device=device, seed=seed)
         if detections.startswith("file:"):
             return DetectionInput._parse_file(detections[5:], checkpoint, device, seed)
@@ -166,6 +177,33 @@ class DetectionInput:
             self.matched = PredictionInput(self.predictions, spec, sequences)
             for seq in sequences:
                 self.matched.check_complete(seq)
+
+    def note_image_domain(self, sequences: list[Sequence], stream: Any = None) -> bool:
+        """Prints once per checkpoint (to ``stream``, default stderr) that a checkpoint trained
+        on rendered images only is not expected to work on the real camera images among
+        ``sequences``, and where the recipe for real data is. Returns whether it printed."""
+        import sys
+
+        if self.checkpoint is None or self.checkpoint in _DOMAIN_NOTED:
+            return False
+        real = [s.name for s in sequences if s.images == "real"]
+        if not real:
+            return False
+        from icmapper.data.sources import may_have_real_images
+        from icmapper.models.network import checkpoint_training_source
+
+        trained = checkpoint_training_source(self.checkpoint)
+        if not trained or may_have_real_images(trained):
+            return False
+        _DOMAIN_NOTED.add(self.checkpoint)
+        print(
+            f"note: checkpoint {self.checkpoint} was trained on synthetic renders only "
+            f"(data.source {trained!r}); it is not expected to work on real camera images "
+            f"({len(real)} sequence(s) here, e.g. {real[0]}). To map real data, train on it: "
+            f"{REAL_DATA_RECIPE}.",
+            file=stream if stream is not None else sys.stderr,
+        )
+        return True
 
     @property
     def needs_images(self) -> bool:

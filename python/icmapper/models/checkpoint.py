@@ -49,6 +49,8 @@ def load_checkpoint(path: str | Path, map_location: str | torch.device = "cpu") 
     path = Path(path)
     if not path.is_file():
         raise OSError(f"checkpoint {path} does not exist")
+    if path.stat().st_size == 0:
+        raise ValueError(f"checkpoint {path} is unreadable: the file is empty (0 bytes)")
     try:
         blob = torch.load(path, map_location=map_location, weights_only=True)
     except Exception as exc:  # corrupt / foreign file
@@ -57,6 +59,8 @@ def load_checkpoint(path: str | Path, map_location: str | torch.device = "cpu") 
         first = str(exc).strip().splitlines()[0] if str(exc).strip() else ""
         if "weights_only" in first or "Weights only" in first:
             first = "not a tensors-only (safe to load) torch checkpoint"
+        elif not first:  # e.g. a bare EOFError of a truncated file
+            first = f"{type(exc).__name__} (truncated or not a torch checkpoint)"
         raise ValueError(f"checkpoint {path} is unreadable: {first}") from None
     if not isinstance(blob, dict) or blob.get("format") != FORMAT:
         raise ValueError(f"{path} is not an icmapper checkpoint")

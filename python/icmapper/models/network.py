@@ -108,6 +108,13 @@ def checkpoint_settings(path: str | Path) -> tuple[PerceptionRange, tuple[int, i
     return rng, image_size
 
 
+def checkpoint_training_source(path: str | Path) -> str:
+    """The source spec a checkpoint was trained on (its training config's ``data.source``; ""
+    when it does not say)."""
+    data = load_checkpoint(path)["config"].get("data", {})
+    return str(data.get("source", "")) if isinstance(data, dict) else ""
+
+
 def checkpoint_mapper_settings(path: str | Path) -> dict[str, Any]:
     """The mapper settings a checkpoint carries (its training config's ``[mapper]`` table, as
     chosen on validation for this network; empty when it has none)."""

@@ -358,7 +358,7 @@ def train(
         with ctx:
             losses = model(batch)
         if not torch.isfinite(losses["loss"].detach()):
-            raise RuntimeError(f"non-finite loss at step {step}: {float(losses['loss'])}")
+            raise RuntimeError(f"non-finite loss at step {step}: {float(losses['loss'].detach())}")
         opt.zero_grad(set_to_none=True)
         losses["loss"].backward()
         torch.nn.utils.clip_grad_norm_(params, s1.grad_clip)
@@ -376,7 +376,7 @@ def train(
             last, sums, count, t0 = means, {}, 0, time.perf_counter()
         if bar is not None:
             bar.update(1)
-            bar.set_postfix(loss=f"{float(losses['loss']):.3f}")
+            bar.set_postfix(loss=f"{float(losses['loss'].detach()):.3f}")
         if done % cfg.ckpt_every == 0 or done == total:
             if info.is_main:
                 save_checkpoint(

@@ -21,25 +21,29 @@ def _size(text: list[int] | tuple[int, int]) -> tuple[int, int]:
     return h, w
 
 
-def _frames(args: argparse.Namespace, n: int) -> list[int]:
+def _frames(args: argparse.Namespace, n: int, name: str) -> list[int]:
+    from icmapper.cliargs import check_frame
+
     if not args.frame:
         return list(range(n))
-    bad = [f for f in args.frame if not 0 <= f < n]
-    if bad:
-        raise ValueError(f"--frame {bad[0]}: the sequence has frames 0-{n - 1}")
-    return list(args.frame)
+    return [check_frame(f, n, what=f"sequence {name}") for f in args.frame]
 
 
 def cmd_vis(args: argparse.Namespace) -> int:
+    from icmapper.cliargs import output_file, output_folder
     from icmapper.progress import progress
     from icmapper.vis.frame import frame_picture, overview_bounds, write_png
     from icmapper.vis.replay import open_replay
     from icmapper.vis.video import write_video
 
+    if args.video:
+        output_file(args.video, "--video")
+    if args.out:
+        output_folder(args.out, "--out")
     replay = open_replay(
         args.run, args.sequence, _size(args.image_size), with_source=not args.no_source
     )
-    frames = _frames(args, len(replay))
+    frames = _frames(args, len(replay), replay.name)
     bounds = overview_bounds(replay)
     out_dir = Path(args.out) if args.out else replay.run.path / "vis" / replay.name
     written: list[Path] = []
@@ -68,9 +72,12 @@ def cmd_vis(args: argparse.Namespace) -> int:
 
 
 def cmd_view(args: argparse.Namespace) -> int:
+    from icmapper.cliargs import output_file
     from icmapper.vis.replay import load_map_items, open_replay
     from icmapper.vis.viewer import map_viewer_data, viewer_data, write_viewer
 
+    if args.out:
+        output_file(args.out, "--out")
     path = Path(args.path)
     if path.is_file() and path.suffix == ".icmap":
         data = map_viewer_data(load_map_items(path), f"map {path.name}")
@@ -109,10 +116,18 @@ def register(subparsers: Any) -> None:
     p.add_argument("run", metavar="RUN_DIR", help="a run folder (icmapper map / compare)")
     p.add_argument("--sequence", help="sequence name or position in the run (default: first)")
     p.add_argument(
-        "--frame", type=int, action="append", metavar="N", help="frame to draw (repeatable)"
+        "--frame",
+        type=int,
+        action="append",
+        metavar="N",
+        help="frame to draw, 0 to the length - 1 (repeatable)",
     )
     p.add_argument("--out", help="folder of the PNGs (default RUN_DIR/vis/SEQUENCE)")
-    p.add_argument("--video", metavar="PATH", help="write a video (.mp4, or .gif) of the frames")
+    p.add_argument(
+        "--video",
+        metavar="PATH",
+        help="write a video (.mp4, or .gif) of the frames; its folder must exist",
+    )
     p.add_argument("--fps", type=float, default=2.0, help="video frames per second (default 2)")
     p.add_argument(
         "--image-size",
@@ -137,7 +152,10 @@ def register(subparsers: Any) -> None:
     )
     v.add_argument("path", metavar="RUN_DIR|MAP.icmap", help="a run folder or a native map file")
     v.add_argument("--sequence", help="sequence name or position in the run (default: first)")
-    v.add_argument("--out", help="HTML path (default RUN_DIR/view-SEQUENCE.html, MAP.html)")
+    v.add_argument(
+        "--out",
+        help="HTML path, in an existing folder (default RUN_DIR/view-SEQUENCE.html, MAP.html)",
+    )
     v.add_argument("--no-thumbnails", action="store_true", help="leave out the camera images")
     v.add_argument(
         "--thumb-size",

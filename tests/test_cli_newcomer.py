@@ -1,0 +1,307 @@
+"""What a newcomer hit (issue 31): each command's rough edge, pinned by the command itself where it
+is cheap (oracle detections on one synthetic drive) and by the function behind it otherwise."""
+
+from __future__ import annotations
+
+import json
+import os
+import stat
+import warnings
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+from icmapper.cli import main
+
+SIM = ["--source", "sim:test:1", "--detections", "oracle:medium", "--no-progress"]
+
+
+def _mode(path: Path) -> int:
+    return stat.S_IMODE(path.stat().st_mode)
+
+
+@pytest.fixture(scope="module")
+def run_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """One oracle run of one synthetic test drive, written under umask 022."""
+    out = tmp_path_factory.mktemp("newcomer") / "runs"
+    old = os.umask(0o022)
+    try:
+        assert main(["map", *SIM, "--out", str(out)]) == 0
+    finally:
+        os.umask(old)
+    return out / "icmapper"
+
+
+# ---------------------------------------------------------------- 1. one rule for --frame
+@pytest.mark.parametrize("frame", ["500", "-1"])
+def test_preview_frame_out_of_range_is_one_line(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], frame: str
+) -> None:
+    out = tmp_path / "p.png"
+    assert main(["scenes", "preview", "--frame", frame, "--out", str(out)]) == 1
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "Traceback" not in err
+    assert f"--frame {frame}: sequence sim-10003-0 has frames 0-43" in err
+    assert not out.exists()
+
+
+def test_vis_frame_out_of_range_same_rule(
+    run_dir: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert main(["vis", str(run_dir), "--frame", "-1", "--no-source", "--out", str(tmp_path)]) == 1
+    err = capsys.readouterr().err
+    assert "--frame -1: sequence " in err and "has frames 0-" in err
+
+
+# ---------------------------------------------------------------- 2. run.json resolves anywhere
+def test_resolve_spec_makes_paths_absolute(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    from icmapper.data.sources import resolve_spec
+
+    (tmp_path / "data").mkdir()
+    monkeypatch.chdir(tmp_path)
+    here = tmp_path.resolve()
+    assert resolve_spec("av2:data") == f"av2:{here / 'data'}"
+    assert resolve_spec("av2:data:val:images=render") == f"av2:{here / 'data'}:val:images=render"
+    assert resolve_spec("nuscenes:./data:val") == f"nuscenes:{here / 'data'}:val"
+    assert resolve_spec("av2-drives:data:3") == f"av2-drives:{here / 'data'}:3"
+    assert resolve_spec("sim:test:4") == "sim:test:4"  # no path
+    assert resolve_spec("av2:missing") == "av2:missing"  # opening it says what is wrong
+
+
+def test_run_from_relative_spec_evaluates_from_another_folder(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from icmapper.testing.av2_fixture import write_av2_sensor_log
+
+    work = tmp_path / "work"
+    work.mkdir()
+    log = write_av2_sensor_log(tmp_path / "data", duration_s=1.0)
+    monkeypatch.chdir(work)
+    spec = f"av2:{os.path.relpath(log, work)}:images=render"
+    args = ["map", "--source", spec, "--detections", "oracle:none", "--no-progress"]
+    assert main([*args, "--out", "runs"]) == 0
+    stored = json.loads((work / "runs" / "icmapper" / "run.json").read_text())["source"]
+    assert stored == f"av2:{log.resolve()}:images=render"
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    monkeypatch.chdir(elsewhere)
+    capsys.readouterr()
+    assert main(["eval", str(work / "runs" / "icmapper")]) == 0
+    assert "### Detection" in capsys.readouterr().out
+
+
+# ---------------------------------------------------------------- 3. output paths, one policy
+def test_eval_json_in_missing_folder_fails_first(
+    run_dir: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    bad = "/nonexistent/dir/x.json"
+    assert main(["eval", str(run_dir), "--json", bad]) == 1
+    cap = capsys.readouterr()
+    assert "### Detection" not in cap.out  # refused before the work
+    assert f"--json {bad}: folder /nonexistent/dir does not exist" in cap.err
+    assert ".tmp" not in cap.err
+
+
+@pytest.mark.parametrize(
+    "command",
+    [
+        ["scenes", "preview", "--out", "{missing}/p.png"],
+        ["vis", "{run}", "--no-source", "--frame", "0", "--video", "{missing}/v.gif"],
+        ["view", "{run}", "--no-source", "--no-thumbnails", "--out", "{missing}/v.html"],
+        ["export", "{run}", "--out", "{missing}/p.json"],
+    ],
+)
+def test_output_files_need_their_folder(
+    run_dir: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str], command: list[str]
+) -> None:
+    missing = tmp_path / "no" / "such"
+    args = [a.format(missing=missing, run=run_dir) for a in command]
+    assert main(args) == 1
+    assert f"folder {missing} does not exist" in capsys.readouterr().err
+    assert not (tmp_path / "no").exists()
+
+
+def test_atomic_write_error_names_the_users_path(tmp_path: Path) -> None:
+    from icmapper.atomic import write_text_atomic
+
+    with pytest.raises(OSError, match=f"cannot write {tmp_path / 'none' / 'x.json'}"):
+        write_text_atomic(tmp_path / "none" / "x.json", "{}")
+
+
+# ---------------------------------------------------------------- 4. an empty checkpoint
+def test_empty_checkpoint_says_why(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    empty = tmp_path / "empty.pt"
+    empty.write_bytes(b"")
+    truncated = tmp_path / "truncated.pt"
+    truncated.write_bytes(b"\x80\x02")  # torch.load raises a bare EOFError
+    args = ["map", "--source", "sim:test:1", "--no-progress", "--out", str(tmp_path / "o")]
+    assert main([*args, "--checkpoint", str(empty)]) == 1
+    assert (
+        f"checkpoint {empty} is unreadable: the file is empty (0 bytes)" in capsys.readouterr().err
+    )
+    assert main([*args, "--checkpoint", str(truncated)]) == 1
+    err = capsys.readouterr().err
+    assert f"{truncated} is unreadable: EOFError (truncated or not a torch checkpoint)" in err
+
+
+# ---------------------------------------------------------------- 5. the umask is honoured
+@pytest.mark.parametrize("mask", [0o022, 0o077])
+def test_atomic_writes_honour_the_umask(tmp_path: Path, mask: int) -> None:
+    from icmapper.atomic import atomic_open, atomic_path, write_text_atomic
+
+    old = os.umask(mask)
+    try:
+        write_text_atomic(tmp_path / "a.json", "{}")
+        with atomic_open(tmp_path / "b.npz", "wb") as fh:
+            fh.write(b"x")
+        with atomic_path(tmp_path / "c.png") as tmp:
+            assert tmp.suffix == ".png"
+            tmp.write_bytes(b"x")
+    finally:
+        os.umask(old)
+    for name in ("a.json", "b.npz", "c.png"):
+        assert _mode(tmp_path / name) == 0o666 & ~mask, name
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.json", "b.npz", "c.png"]
+
+
+def test_run_files_are_0644_under_umask_022(run_dir: Path) -> None:
+    files = [p for p in run_dir.iterdir() if p.is_file()]
+    assert {p.suffix for p in files} >= {".json", ".npz", ".icmap", ".geojson", ".png"}
+    assert {p.name: _mode(p) for p in files} == {p.name: 0o644 for p in files}
+
+
+# ---------------------------------------------------------------- 9. validate before any folder
+def test_bad_oracle_preset_creates_nothing(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = tmp_path / "D"
+    args = ["map", "--source", "sim:test:1", "--detections", "oracle:extreme", "--out", str(out)]
+    assert main(args) == 1
+    cap = capsys.readouterr()
+    assert "unknown oracle noise preset 'extreme'" in cap.err and "started" not in cap.err
+    assert not out.exists()
+
+
+# ---------------------------------------------------------------- 10. no scalar warning in train
+def test_train_prints_no_requires_grad_warning(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import torch
+    from icmapper.testing.configs import tiny_config
+    from icmapper.training.loop import train
+
+    torch.set_num_threads(1)
+    monkeypatch.setenv("ICMAPPER_PROGRESS", "lines")  # the bar's loss postfix is drawn
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        train(tiny_config(), 1, tmp_path, max_steps=2, progress=True)
+    assert not [w for w in caught if "requires_grad" in str(w.message)]
+
+
+# ---------------------------------------------------------------- 14. export --help
+def test_export_help_lists_what_it_writes(capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit):
+        main(["export", "--help"])
+    text = capsys.readouterr().out
+    writes, _, read_only = text.partition("read only")
+    assert "maptr" not in writes.split("formats it writes")[1]
+    assert "maptr" in read_only and "streammapnet" in writes
+
+
+# ---------------------------------------------------------------- 17. --workers without effect
+def test_workers_without_city_says_in_process(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    import icmapper.city.ray_backend as rb
+
+    monkeypatch.setattr(rb, "ray_available", lambda: False)
+    assert main(["map", *SIM, "--workers", "2", "--out", str(tmp_path / "o")]) == 0
+    err = capsys.readouterr().err
+    assert "this run maps in-process" in err and "pip install 'icmapper[ray]'" in err
+
+
+def test_workers_city_without_ray_says_in_process(monkeypatch: pytest.MonkeyPatch) -> None:
+    import icmapper.city.ray_backend as rb
+    from icmapper.city.cli import workers_note
+
+    monkeypatch.setattr(rb, "ray_available", lambda: False)
+    note = workers_note(2, city=True)
+    assert note is not None and "in-process" in note and "icmapper[ray]" in note
+    assert workers_note(0, city=True) is None and workers_note(0, city=False) is None
+
+
+# ---------------------------------------------------------------- 18. --version and help
+def test_version_and_help_texts(capsys: pytest.CaptureFixture[str]) -> None:
+    from icmapper import __version__
+
+    with pytest.raises(SystemExit) as exc:
+        main(["--version"])
+    assert exc.value.code == 0 and capsys.readouterr().out.strip() == f"icmapper {__version__}"
+    with pytest.raises(SystemExit):
+        main(["map", "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    for flag in ("--method METHOD", "--seed SEED", "--device DEVICE", "--image-size H W"):
+        after = text.split(flag, 1)[1].lstrip()
+        assert not after.startswith("--"), f"{flag} has no help"
+
+
+# ---------------------------------------------------------------- 19. StreamMapNet's layout
+def test_streammapnet_ring_layout_round_trip(tmp_path: Path) -> None:
+    from icmapper.formats import PredictedFrame, PredictionSet, read_predictions
+    from icmapper.formats.streammapnet import write
+    from icmapper.geom import resample
+
+    square = np.array([[0.0, 0.0], [4.0, 0.0], [4.0, 10.0], [0.0, 10.0]])
+    ring = resample(square, 20, True).astype(np.float32)  # (20, 2) evenly along the contour
+    line = np.stack([np.linspace(0, 19, 20), np.zeros(20)], 1).astype(np.float32)
+    frame = PredictedFrame(
+        "tok",
+        None,
+        None,
+        np.array([0, 1]),
+        np.array([0.9, 0.8], np.float32),
+        np.stack([ring, line]),
+    )
+    path = tmp_path / "sub.json"
+    write(path, PredictionSet("icmapper", "", [frame]))
+    vectors = json.loads(path.read_text())["results"]["tok"]["vectors"]
+    assert [len(v) for v in vectors] == [20, 20]
+    assert vectors[0][0] == vectors[0][-1]  # closed: the 20th point repeats the first
+    back = read_predictions(path, "streammapnet").frames[0].points
+    np.testing.assert_array_equal(back[1], line)
+    # 19 points come back as written, the left-out one lay on a straight edge: same shape
+    kept = {tuple(p) for p in back[0].tolist()}
+    assert sum(tuple(p) in kept for p in ring.tolist()) >= 19
+    import shapely
+
+    gap = shapely.LinearRing(ring).hausdorff_distance(shapely.LinearRing(back[0]))
+    assert gap < 1e-5
+
+
+# ---------------------------------------------------------------- 20. a synthetic checkpoint
+def test_synthetic_checkpoint_on_real_images_says_so(tmp_path: Path) -> None:
+    import io
+
+    from icmapper.checkpoints import DEFAULT_CHECKPOINT
+    from icmapper.mapping import run as run_mod
+    from icmapper.mapping.run import DetectionInput
+    from icmapper.models.checkpoint import load_checkpoint, save_checkpoint
+
+    real = [SimpleNamespace(name="log-1", images="real")]
+    rendered = [SimpleNamespace(name="sim-1", images="rendered")]
+    inp = DetectionInput(checkpoint=str(DEFAULT_CHECKPOINT))
+    run_mod._DOMAIN_NOTED.clear()
+    out = io.StringIO()
+    assert not inp.note_image_domain(rendered, out)  # type: ignore[arg-type]
+    assert inp.note_image_domain(real, out)  # type: ignore[arg-type]
+    assert not inp.note_image_domain(real, out)  # type: ignore[arg-type]  # once
+    text = out.getvalue()
+    assert text.count("\n") == 1 and "not expected to work on real camera images" in text
+    assert "configs/nuscenes_newsplit.toml" in text and "log-1" in text
+    blob = load_checkpoint(DEFAULT_CHECKPOINT)
+    blob["config"]["data"]["source"] = "av2:/data/av2/train"
+    av2 = tmp_path / "av2.pt"
+    save_checkpoint(av2, **{k: blob[k] for k in ("model", "optimizer", "stage", "step", "config")})
+    assert not DetectionInput(checkpoint=str(av2)).note_image_domain(real, out)  # type: ignore[arg-type]
+    run_mod._DOMAIN_NOTED.clear()
