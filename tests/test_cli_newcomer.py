@@ -305,3 +305,29 @@ def test_synthetic_checkpoint_on_real_images_says_so(tmp_path: Path) -> None:
     save_checkpoint(av2, **{k: blob[k] for k in ("model", "optimizer", "stage", "step", "config")})
     assert not DetectionInput(checkpoint=str(av2)).note_image_domain(real, out)  # type: ignore[arg-type]
     run_mod._DOMAIN_NOTED.clear()
+
+
+# ---------------------------------------------------------------- 16. main.sh says what it does
+def test_main_script_says_it_is_setting_up(tmp_path: Path) -> None:
+    import shutil
+    import subprocess
+
+    repo = tmp_path / "repo"
+    (repo / "scripts").mkdir(parents=True)
+    shutil.copy(Path(__file__).resolve().parents[1] / "scripts" / "main.sh", repo / "scripts")
+    (repo / "scripts" / "setup.sh").write_text("echo SETUP-RAN >&2\n")
+    (repo / ".venv" / "bin").mkdir(parents=True)
+    fake = repo / ".venv" / "bin" / "icmapper"
+    fake.write_text("#!/bin/sh\necho COMPARE-RAN >&2\n")
+    fake.chmod(0o755)
+    done = subprocess.run(
+        ["bash", str(repo / "scripts" / "main.sh")],
+        capture_output=True, text=True, cwd=tmp_path,
+        env={"PATH": "/usr/bin:/bin", "ICMAPPER_OUT": str(tmp_path / "out")},
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    lines = done.stderr.splitlines()
+    setup = lines.index("SETUP-RAN")
+    assert any("setting up" in line and "minutes" in line for line in lines[:setup])
+    assert any(line.startswith("main: set up in") for line in lines[setup:])
+    assert lines.index("COMPARE-RAN") > setup
