@@ -331,3 +331,38 @@ def test_main_script_says_it_is_setting_up(tmp_path: Path) -> None:
     assert any("setting up" in line and "minutes" in line for line in lines[:setup])
     assert any(line.startswith("main: set up in") for line in lines[setup:])
     assert lines.index("COMPARE-RAN") > setup
+
+
+# ---------------------------------------------------------------- 13. legends and labels
+def test_no_source_picture_has_no_ground_truth_legend(run_dir: Path) -> None:
+    from icmapper.vis.frame import frame_picture
+    from icmapper.vis.replay import open_replay
+    from icmapper.vis.style import CLASS_RGB, tint
+
+    band = tint(CLASS_RGB[1], 0.7)  # the legend's ground-truth swatch
+
+    def header_has_band(with_source: bool) -> bool:
+        replay = open_replay(run_dir, image_size=(96, 264), with_source=with_source)
+        pic = np.asarray(frame_picture(replay, 0))[:24]  # (24, W, 3) the header strip
+        return bool(np.all(pic == band, axis=2).sum() > 30)
+
+    assert header_has_band(True)
+    assert not header_has_band(False)
+
+
+def test_preview_labels_inside_the_picture() -> None:
+    import matplotlib.pyplot as plt
+    from icmapper.data.preview import preview_figure
+    from icmapper.data.sim import sim_sequence
+
+    fig = preview_figure(sim_sequence(10_003, 0, image_size=(64, 176)), 10)
+    try:
+        fig.canvas.draw()
+        renderer = fig.canvas.get_renderer()  # type: ignore[attr-defined]
+        bev = fig.axes[-1]
+        for text in (bev.xaxis.label, bev.yaxis.label, bev.title, *bev.get_xticklabels()):
+            box = text.get_window_extent(renderer)
+            assert box.y0 >= 0 and box.y1 <= fig.bbox.height, text.get_text()
+        assert "-0" not in [t.get_text() for t in bev.get_xticklabels()]
+    finally:
+        plt.close(fig)

@@ -7,6 +7,7 @@ from __future__ import annotations
 import os
 import warnings
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -70,6 +71,21 @@ def preview_png(
     Raises ValueError when the sequence has no images or lacks the six nuScenes cameras, and
     IndexError for a frame out of range.
     """
+    import matplotlib.pyplot as plt
+
+    fig = preview_figure(sequence, frame_index, rng)
+    out = Path(out_path)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    try:
+        with atomic_path(out) as tmp:
+            fig.savefig(tmp, format="png")
+    finally:
+        plt.close(fig)
+    return out
+
+
+def preview_figure(sequence: Sequence, frame_index: int, rng: PerceptionRange = RANGE_60x30) -> Any:
+    """The matplotlib figure ``preview_png`` writes (errors as there); the caller closes it."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -95,7 +111,7 @@ def preview_png(
             ax.imshow(images[names.index(name)].transpose(1, 2, 0))  # (H, W, 3)
             ax.set_title(name, fontsize=8, pad=2)
             ax.axis("off")
-    ax = fig.add_axes((0.75, 0.05, 0.24, 0.88))
+    ax = fig.add_axes((0.75, 0.08, 0.24, 0.85))  # room below for the tick labels and x label
     for iid, cls, pts, closed in _bev_instances(sequence, frame.pose, rng):
         if closed:
             pts = np.concatenate([pts, pts[:1]])
@@ -121,7 +137,7 @@ def preview_png(
     ax.set_xlabel("ego y (m), left is left", fontsize=6)
     ax.set_ylabel("ego x (m), forward", fontsize=6)
     ticks = np.linspace(-rng.half_y, rng.half_y, 5)
-    ax.set_xticks(ticks, [f"{-t:g}" for t in ticks])  # plotted at -y: label with y
+    ax.set_xticks(ticks, [f"{0.0 - t:g}" for t in ticks])  # plotted at -y: label with y (no "-0")
     ax.set_title(f"{sequence.name} frame {frame.index}  BEV GT {rng.name} m", fontsize=8)
     ax.tick_params(labelsize=6)
     handles = [
@@ -129,11 +145,4 @@ def preview_png(
         for k, c in CLASS_COLOURS.items()
     ]
     ax.legend(handles=handles, fontsize=6, loc="lower right")
-    out = Path(out_path)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    try:
-        with atomic_path(out) as tmp:
-            fig.savefig(tmp, format="png")
-    finally:
-        plt.close(fig)
-    return out
+    return fig

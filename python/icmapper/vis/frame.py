@@ -230,14 +230,16 @@ def overview_panel(
     return out
 
 
-def _legend(d: ImageDraw.ImageDraw, x: int, y: int) -> None:
+def _legend(d: ImageDraw.ImageDraw, x: int, y: int, ground_truth: bool) -> None:
+    """The class colours, and the ground truth's pale band where the picture draws it."""
     f = font(12)
     for cls, name in enumerate(CLASS_NAMES):
         d.line((x, y + 8, x + 18, y + 8), fill=CLASS_RGB[cls], width=3)
         d.text((x + 22, y), name, fill=TEXT_RGB, font=f)
         x += 30 + int(d.textlength(name, font=f))
-    d.line((x, y + 8, x + 18, y + 8), fill=tint(CLASS_RGB[1], 0.7), width=6)
-    d.text((x + 22, y), "ground truth", fill=TEXT_RGB, font=f)
+    if ground_truth:
+        d.line((x, y + 8, x + 18, y + 8), fill=tint(CLASS_RGB[1], 0.7), width=6)
+        d.text((x + 22, y), "ground truth", fill=TEXT_RGB, font=f)
 
 
 def frame_picture(
@@ -285,7 +287,8 @@ def frame_picture(
         f"{len(p)} predictions ({tracked} tracked)"
     )
     d.text((_GAP + 2, 5), head, fill=TEXT_RGB, font=font(14))
-    _legend(d, max(width - 470, _GAP + 2 + int(d.textlength(head, font=font(14))) + 20), 6)
+    x = max(width - 470, _GAP + 2 + int(d.textlength(head, font=font(14))) + 20)
+    _legend(d, x, 6, ground_truth=view.gt is not None)
     return pic
 
 
