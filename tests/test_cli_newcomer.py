@@ -366,3 +366,58 @@ def test_preview_labels_inside_the_picture() -> None:
         assert "-0" not in [t.get_text() for t in bev.get_xticklabels()]
     finally:
         plt.close(fig)
+
+
+# ---------------------------------------------------------------- 7, 8. city evaluation
+@pytest.fixture(scope="module")
+def cities(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
+    """Two drives of one synthetic city, oracle detections, in merge and continue mode."""
+    root = tmp_path_factory.mktemp("cities")
+    out = {}
+    for mode in ("merge", "continue"):
+        args = ["map", "--source", "sim-city:val:0:2", "--detections", "oracle:low"]
+        args += ["--no-progress", "--city", str(root / mode), "--city-mode", mode]
+        assert main([*args, "--image-size", "32", "88"]) == 0
+        out[mode] = root / mode
+    return out
+
+
+def test_city_eval_names_drives_and_uses_the_common_headers(
+    cities: dict[str, Path], capsys: pytest.CaptureFixture[str]
+) -> None:
+    from icmapper.city.manifest import read_manifest
+
+    capsys.readouterr()
+    assert main(["eval", str(cities["merge"])]) == 0
+    text = capsys.readouterr().out
+    for d in read_manifest(cities["merge"]).drives:
+        assert f"| icmapper drive {d.index} {d.sequence} |" in text
+    assert "| icmapper |" not in text
+    assert "CD_cross" not in text and "CD_divid" not in text
+    city_head = [line for line in text.splitlines() if line.startswith("| Method")][0]
+    assert "CD_ped | CD_div | CD_bound | mCD | mGAP" in city_head
+
+
+def test_single_drive_mean_never_averages_inf() -> None:
+    from icmapper.city.evaluate import single_drive_mean
+
+    a = {"CD": {"ped_crossing": 2.0, "divider": 0.2, "boundary": 0.4}, "mGAP": 0.5}
+    b = {"CD": {"ped_crossing": float("inf"), "divider": 0.4, "boundary": 0.6}, "mGAP": 0.7}
+    m = single_drive_mean([a, b])
+    assert m["CD"] == pytest.approx({"ped_crossing": 2.0, "divider": 0.3, "boundary": 0.5})
+    assert m["mCD"] == pytest.approx((2.0 + 0.3 + 0.5) / 3) and m["mGAP"] == pytest.approx(0.6)
+    assert m["missing"] == {"ped_crossing": 1, "divider": 0, "boundary": 0}
+
+
+def test_city_table_says_what_each_mode_measures(cities: dict[str, Path]) -> None:
+    from icmapper.city.evaluate import city_table, evaluate_city
+
+    merge = evaluate_city(cities["merge"])
+    assert merge["single_drive_mean"] is not None
+    assert all(np.isfinite(v) for v in [merge["single_drive_mean"]["mCD"]])
+    assert "single-drive maps (mean)" in city_table(merge)
+    cont = evaluate_city(cities["continue"])
+    assert cont["single_drive_mean"] is None  # each drive's map is the city so far
+    assert all(r["mapping"] is None for r in cont["drives"])
+    table = city_table(cont)
+    assert "single-drive" not in table and "Continue mode" in table and "inf" not in table

@@ -1,8 +1,15 @@
 """Cross-drive evaluation of a city run (GlobalMapNet's cross-scene protocol): the ground-truth
 city map is the world's instances clipped to the union of every patch visited by every drive;
 the city map is scored against it (CD per class, mCD, GAP per class, mGAP, as for one drive's
-map); each drive's own run is evaluated as usual, and the mean of the single-drive maps' mCD and
-mGAP (each against its own drive's ground truth) is reported beside the city map's."""
+map); each drive's own run is evaluated as usual (its rows named by the drive).
+
+Beside the city map, what is meaningful for the mode:
+- ``merge``: every drive's map is that drive's alone, scored against its own ground truth; their
+  mean per class is reported over the drives whose map holds the class (a drive without it has
+  CD inf, counted as missing, never averaged), mCD the mean of those class means.
+- ``continue``: a drive's map is the city map as it stood after that drive, which holds every
+  earlier drive too: scoring it against one drive's ground truth means nothing, so per-drive
+  maps are not scored (per-frame metrics are) and only the city map is."""
 
 from __future__ import annotations
 
@@ -17,8 +24,9 @@ from icmapper.city.run import city_sequences
 
 
 def evaluate_city(city: str | os.PathLike) -> dict[str, Any]:
-    """{"city": mapping metrics of the city map, "drives": per-drive results (evaluate_run),
-    "single_drive_mean": mean mCD / mGAP of the drive maps, "method", "mode", "n_drives"}."""
+    """{"city": mapping metrics of the city map, "drives": per-drive results (evaluate_run; their
+    "method" names the drive), "single_drive_mean": the drive maps' mean (``single_drive_mean``;
+    None in continue mode), "method", "mode", "n_drives", "failed_drives"}."""
     from icmapper.data import gt as gt_mod
     from icmapper.data.types import PerceptionRange
     from icmapper.eval.detection import THRESHOLDS
@@ -41,15 +49,16 @@ def evaluate_city(city: str | os.PathLike) -> dict[str, Any]:
     for d, seq in zip(manifest.ok_drives(), seqs, strict=True):
         r = evaluate_run(city / d.run, sources=[seq])
         r["drive"] = d.index
+        r["method"] = f"{manifest.method} drive {d.index} {d.sequence}"
+        if manifest.mode == "continue":  # the city so far, not this drive's map
+            r["mapping"] = None
         drives.append(r)
-    maps = [r["mapping"] for r in drives if "mapping" in r]
-    mean = {
-        "mCD": float(np.mean([m["mCD"] for m in maps])) if maps else float("nan"),
-        "mGAP": float(np.mean([m["mGAP"] for m in maps])) if maps else float("nan"),
-    }
+    maps = [r["mapping"] for r in drives if r.get("mapping") is not None]
+    mean = single_drive_mean(maps) if manifest.mode != "continue" else None
     return {
         "method": manifest.method,
         "mode": manifest.mode,
+        "range": manifest.range_name,
         "n_drives": len(seqs),
         "failed_drives": len(manifest.drives) - len(seqs),
         "city": city_metrics,
@@ -58,20 +67,51 @@ def evaluate_city(city: str | os.PathLike) -> dict[str, Any]:
     }
 
 
-def city_table(result: dict[str, Any]) -> str:
-    """Markdown: the city map's CD per class, mCD and mGAP beside the single-drive mean."""
+def single_drive_mean(maps: list[dict[str, Any]]) -> dict[str, Any]:
+    """The drive maps' mapping metrics (``global_metrics`` results) averaged per class over the
+    drives whose CD of the class is finite: {"CD": {class: mean}, "mCD", "mGAP", "missing":
+    {class: drives whose map lacks it (CD inf)}}; NaN where no drive has a value."""
     from icmapper.data.types import CLASS_NAMES
 
-    c = result["city"]
-    head = "| map | " + " | ".join(f"CD_{n.split('_')[-1][:5]}" for n in CLASS_NAMES)
-    head += " | mCD | mGAP |\n|---|" + "---|" * (len(CLASS_NAMES) + 2)
-    cds = " | ".join(f"{c['CD'][n]:.3f}" for n in CLASS_NAMES)
+    def mean(values: list[float]) -> float:
+        return float(np.mean(values)) if values else float("nan")
+
+    cd = {n: mean([m["CD"][n] for m in maps if np.isfinite(m["CD"][n])]) for n in CLASS_NAMES}
+    finite = [v for v in cd.values() if np.isfinite(v)]
+    return {
+        "CD": cd,
+        "mCD": mean(finite),
+        "mGAP": mean([m["mGAP"] for m in maps if np.isfinite(m["mGAP"])]),
+        "missing": {n: sum(bool(np.isinf(m["CD"][n])) for m in maps) for n in CLASS_NAMES},
+    }
+
+
+def city_table(result: dict[str, Any]) -> str:
+    """Markdown: the city map's CD per class, mCD and mGAP (the columns of every mapping table)
+    beside what the mode makes meaningful (module docstring), with a line on what is left out."""
+    from icmapper.eval.report import mapping_table
+
+    rng = result["range"]
     rows = [
-        f"| city map ({result['n_drives']} drives, {result['mode']}) | {cds} | "
-        f"{c['mCD']:.3f} | {100 * c['mGAP']:.1f} |",
-        "| single-drive maps (mean) | "
-        + " | ".join("" for _ in CLASS_NAMES)
-        + f" | {result['single_drive_mean']['mCD']:.3f} | "
-        f"{100 * result['single_drive_mean']['mGAP']:.1f} |",
+        {
+            "method": f"city map ({result['n_drives']} drives, {result['mode']})",
+            "range": rng,
+            "mapping": result["city"],
+        }
     ]
-    return f"## City run: {result['method']}\n\n{head}\n" + "\n".join(rows) + "\n"
+    mean = result["single_drive_mean"]
+    if mean is not None:
+        rows.append({"method": "single-drive maps (mean)", "range": rng, "mapping": mean})
+        missing = [f"{k} lack {n}" for n, k in mean["missing"].items() if k]
+        note = (
+            f"Single-drive maps: each drive's own map against its own ground truth; drives whose "
+            f"map lacks a class (CD inf) are left out of that class's mean: {', '.join(missing)}."
+            if missing
+            else "Single-drive maps: each drive's own map against its own ground truth."
+        )
+    else:
+        note = (
+            "Continue mode: each drive's map is the city map as it stood after that drive, so "
+            "only the city map is scored (the drives' rows give per-frame metrics)."
+        )
+    return f"## City run: {result['method']}\n\n{mapping_table(rows)}\n\n{note}\n"
