@@ -421,3 +421,28 @@ def test_city_table_says_what_each_mode_measures(cities: dict[str, Path]) -> Non
     assert all(r["mapping"] is None for r in cont["drives"])
     table = city_table(cont)
     assert "single-drive" not in table and "Continue mode" in table and "inf" not in table
+
+
+# ---------------------------------------------------------------- 6. a file without track ids
+def test_eval_of_a_file_without_ids_says_so(
+    run_dir: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    sub = tmp_path / "sub.json"
+    assert main(["export", str(run_dir), "--format", "streammapnet", "--out", str(sub)]) == 0
+    capsys.readouterr()
+    out_json = tmp_path / "r.json"
+    args = ["eval", f"file:{sub}", "--source", "sim:test:1", "--cmap", "both"]
+    assert main([*args, "--json", str(out_json)]) == 0
+    cap = capsys.readouterr()
+    assert f"{sub} carries no track ids" in cap.err and "MOTA" in cap.err
+    det = [line for line in cap.out.splitlines() if line.startswith("| streammapnet:")]
+    cells = [c.strip() for c in det[0].strip("|").split("|")]
+    assert cells[-3] == "-" and cells[-1] != "-"  # icmapper's C-mAP out, MapTracker's stands
+    r = json.loads(out_json.read_text())["runs"][0]
+    assert r["track_ids"] == "none" and r["consistency"]["C-mAP"] is None
+    assert r["tracking"]["mean"]["MOTA"] is None and r["tracking"]["mean"]["IDS"] is None
+    assert r["tracking"]["mean"]["MOTP"] is not None and r["detection"]["mAP"] > 0
+    # a run (with ids) keeps every number and gets no note
+    assert main(["eval", str(run_dir)]) == 0
+    cap = capsys.readouterr()
+    assert "no track ids" not in cap.err

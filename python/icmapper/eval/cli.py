@@ -6,6 +6,7 @@ import argparse
 import json
 import math
 import os
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -41,6 +42,7 @@ def run(args: argparse.Namespace) -> int:
     from icmapper.cliargs import output_file
     from icmapper.eval.evaluate import evaluate_predictions, evaluate_run
     from icmapper.eval.report import markdown
+    from icmapper.eval.untracked import note
 
     if args.json:
         output_file(args.json, "--json")  # before the work, not after it
@@ -58,6 +60,8 @@ def run(args: argparse.Namespace) -> int:
             if not args.source:
                 raise ValueError(f"{d}: evaluating a prediction file needs --source SPEC")
             r = evaluate_predictions(d, args.source, args.score_threshold, maptracker=mt)
+            if (line := note(r)) is not None:
+                print(line, file=sys.stderr)
         else:
             r = evaluate_run(d, score_threshold=args.score_threshold, maptracker=mt)
         results.append(r)

@@ -286,6 +286,10 @@ def evaluate_predictions(
     result = evaluate(
         per_seq, gts, None, None, preds.range_name, score_threshold, maptracker=maptracker
     )
+    if all(f.track_ids is None for f in preds.frames):  # id-based numbers would mean nothing
+        from icmapper.eval.untracked import without_track_ids
+
+        without_track_ids(result)
     result["method"] = f"{preds.format}:{os.path.basename(preds.path)}"
     result["run"] = preds.path
     result["source"] = source
