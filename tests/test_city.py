@@ -1,7 +1,8 @@
 """City runs: drives of one synthetic city mapped and merged into one city map by the engine
 (in-process and on a 2-worker local Ray cluster, the same map), extended later without redoing
 old drives, continued drive after drive, a failing drive left out, and the cross-drive
-evaluation (the city map closer to the ground truth than the single-drive maps on average)."""
+evaluation (on a real AV2 log: the city map closer to the ground truth than the single-drive maps
+on average)."""
 
 from __future__ import annotations
 
@@ -83,9 +84,17 @@ def test_city_run_merge_extend_and_evaluate(tmp_path: Path) -> None:
     assert [d.index for d in m2.drives] == [0, 1, 2]
     assert json.loads((city / "city.json").read_text())["drives"][2]["sequence"].endswith("-2")
     r = evaluate_city(city)
-    assert r["n_drives"] == 3 and np.isfinite(r["city"]["mCD"])
-    # the city map is closer to the (larger) city ground truth than single drives to their own
-    assert r["city"]["mCD"] < r["single_drive_mean"]["mCD"] * 1.5
+    assert r["n_drives"] == 3 and r["failed_drives"] == 0
+    city_cd = r["city"]["CD"]
+    assert r["city"]["mCD"] == pytest.approx(np.mean(list(city_cd.values())))
+    drives = [d["mapping"] for d in r["drives"]]
+    assert r["single_drive_mean"]["mCD"] == pytest.approx(np.mean([d["mCD"] for d in drives]))
+    # Merging drives makes no class worse than the worst single drive is against its own GT.
+    # (Closer than the single drives' mean it is not on these three short drives: mCD 1.264 vs
+    # 1.061 m, crossings 3.21 vs 2.61 m; that claim is asserted on the real log in
+    # test_av2_city_map_beats_single_drives.)
+    for name, cd in city_cd.items():
+        assert cd <= max(d["CD"][name] for d in drives), (name, city_cd, drives)
     with pytest.raises(ValueError, match="was built with method"):
         build_city(city, [SPEC], _settings("post-track"), "60x30", log=_quiet)
 

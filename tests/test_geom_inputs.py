@@ -77,7 +77,11 @@ def test_bad_points(func: str, case: tuple[str, Any, type[Exception], str | None
 @pytest.mark.parametrize("pts", [EMPTY, ONE], ids=["empty", "one_point"])
 def test_too_few_points(func: str, pts: np.ndarray) -> None:
     if func.startswith("chamfer") and len(pts) == 1:
-        assert POINT_FUNCS[func](pts) is not None  # a single point is a valid Chamfer point set
+        # a single point is a valid Chamfer point set: (mean distance of GOOD's points to it +
+        # its distance to the nearest of GOOD's points) / 2
+        d = np.linalg.norm(GOOD - pts[0], axis=1)  # (4,)
+        got = np.ravel(POINT_FUNCS[func](pts))
+        np.testing.assert_allclose(got, [(d.mean() + d.min()) / 2], rtol=1e-12)
         return
     with pytest.raises(ValueError, match="point"):
         POINT_FUNCS[func](pts)

@@ -14,7 +14,7 @@ from collections.abc import Iterator
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 from icmapper import geom
@@ -76,14 +76,23 @@ def test_resample_any_input(pts: np.ndarray, n: int, closed: bool) -> None:
 @SETTINGS
 @given(pts=_points(METRES, 2), n=st.integers(2, 400))
 def test_resample_keeps_the_ends_and_the_length(pts: np.ndarray, n: int) -> None:
+    """n points on the polyline: its two ends, evenly spaced along it (every point at arc length
+    k L / (n - 1) of the input, found by numpy interpolation), so the resampled polyline is
+    never longer than the input and its points are in order along it."""
     try:
         out = geom.resample(pts, n)
     except ValueError:  # degenerate (zero-length) input
         assert np.allclose(pts, pts[0]) or len(np.unique(pts, axis=0)) < 2
         return
+    assert out.shape == (n, 2)
     np.testing.assert_allclose(out[[0, -1]], pts[[0, -1]], atol=1e-6)
-    seg = np.linalg.norm(np.diff(out, axis=0), axis=1)
-    assert seg.max() - seg.min() < 1e-6 * max(1.0, seg.max()) + 1e-9 or len(pts) > 2
+    s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(pts, axis=0), axis=1))])  # (m,)
+    t = np.linspace(0.0, s[-1], n)  # (n,) the even arc lengths
+    want = np.stack([np.interp(t, s, pts[:, 0]), np.interp(t, s, pts[:, 1])], axis=1)  # (n, 2)
+    scale = max(1.0, float(np.abs(pts).max()))
+    np.testing.assert_allclose(out, want, rtol=0, atol=1e-9 * scale + 1e-9 * s[-1])
+    length = float(np.linalg.norm(np.diff(out, axis=0), axis=1).sum())
+    assert length <= s[-1] * (1 + 1e-9) + 1e-9 * scale
 
 
 @SETTINGS
@@ -142,7 +151,12 @@ def test_union_any_input(rings: list[np.ndarray]) -> None:
         max_size=4,
     ),
 )
-def test_union_area_matches_shapely(centre: tuple, squares: list) -> None:
+@example(centre=(0.0, 0.0), squares=[(0, 1.5, 1), (1.5, 0, 1), (0, -1.5, 1), (-1.5, 0, 1)])
+def test_union_matches_shapely_ring_by_ring(centre: tuple, squares: list) -> None:
+    """As test_geom_functions.test_polygon_union_matches_shapely: one outer ring per polygon of
+    shapely's union, counter-clockwise, largest first, each covering its polygon's exterior
+    (holes included: the engine drops them, so each ring's area is the exterior's and the holes'
+    area is what the rings hold beyond shapely's union; the explicit example has a hole)."""
     import shapely
 
     rings = [
@@ -151,10 +165,24 @@ def test_union_area_matches_shapely(centre: tuple, squares: list) -> None:
     ]
     out = geom.polygon_union(rings)
     ref = shapely.union_all([shapely.Polygon(r) for r in rings])
-    area = sum(shapely.Polygon(r).area for r in out)
-    assert area == pytest.approx(ref.area, rel=1e-6) or len(out) < len(
-        getattr(ref, "geoms", [ref])
-    )  # outer rings only: holes of the union are not subtracted
+    ref_polys = list(getattr(ref, "geoms", [ref]))
+    assert len(out) == len(ref_polys)
+    got = [shapely.Polygon(r) for r in out]
+    assert all(g.exterior.is_ccw for g in got)
+    assert [g.area for g in got] == sorted((g.area for g in got), reverse=True)
+    matched = set()
+    for p in ref_polys:
+        outer = shapely.Polygon(p.exterior)
+        # each polygon of shapely's union has its own ring: the one it differs least from (the
+        # grid the engine's boolean ops snap to moves vertices by ~1e-9 relative)
+        k = min(range(len(got)), key=lambda j: got[j].symmetric_difference(outer).area)
+        matched.add(k)
+        tol = 1e-7 * max(1.0, outer.area)
+        assert got[k].symmetric_difference(outer).area <= tol
+        assert got[k].area == pytest.approx(outer.area, rel=1e-7)
+        holes = sum(shapely.Polygon(h).area for h in p.interiors)
+        assert got[k].area - holes == pytest.approx(p.area, rel=1e-7, abs=tol)
+    assert len(matched) == len(out)
 
 
 @SETTINGS

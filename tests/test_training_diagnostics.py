@@ -4,11 +4,15 @@
 from __future__ import annotations
 
 import csv
+import json
+import shutil
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
 import pytest
 import torch
+from icmapper.data.types import CLASS_NAMES
 from icmapper.testing.configs import tiny_raw
 from icmapper.training import curves, diagnostics
 from icmapper.training.config import config_from_dict
@@ -27,14 +31,35 @@ def _threads() -> None:
 
 
 def test_curves_of_a_run(tmp_path: Path) -> None:
+    """Every snapshot gets a row of finite APs (mAP the mean of the classes'); the shipped
+    checkpoint, placed as a third snapshot, gets the detection APs that `icmapper map` with the
+    streaming detector and `icmapper eval` report for it (an untrained tiny run's APs are all 0,
+    which would not tell a right number from a constant)."""
+    from icmapper.checkpoints import DEFAULT_CHECKPOINT
+    from icmapper.cli import main
+
     train(config_from_dict(TINY6), 1, tmp_path, progress=False)
+    shutil.copyfile(DEFAULT_CHECKPOINT, tmp_path / "snapshots" / "stage1_step6.pt")
     assert curves.main([str(tmp_path), "--source", "sim:val:1"]) == 0
     with (tmp_path / "curves_stage1.csv").open() as fh:
         rows = list(csv.DictReader(fh))
-    assert [int(r["step"]) for r in rows] == [2, 4]
+    assert [int(r["step"]) for r in rows] == [2, 4, 6]
     for r in rows:
         values = [float(r[k]) for k in curves.FIELDS[1:]]
-        assert all(0.0 <= v <= 100.0 for v in values if np.isfinite(v))
+        assert all(np.isfinite(v) and 0.0 <= v <= 100.0 for v in values), r
+        assert values[-1] == pytest.approx(np.mean(values[:-1]), abs=0.01)  # 2 decimals written
+    argv = ["map", "--source", "sim:val:1", "--checkpoint", str(DEFAULT_CHECKPOINT),
+            "--method", "icmapper-base", "--out", str(tmp_path / "map")]  # fmt: skip
+    argv.append("--no-progress")
+    assert main(argv) == 0
+    out = tmp_path / "eval.json"
+    assert main(["eval", str(tmp_path / "map" / "icmapper-base"), "--json", str(out)]) == 0
+    det = json.loads(out.read_text())["runs"][0]["detection"]
+    shipped = rows[-1]
+    assert float(shipped["mAP"]) == pytest.approx(100 * det["mAP"], abs=0.005)
+    for name in CLASS_NAMES:
+        assert float(shipped[f"AP_{name}"]) == pytest.approx(100 * det["AP_class"][name], abs=0.005)
+    assert float(shipped["mAP"]) > 20.0  # the trained weights detect (65.07 when written)
     png = tmp_path / "curves_stage1.png"
     assert png.stat().st_size > 1000
     # a second call evaluates nothing new and keeps the rows
@@ -48,11 +73,59 @@ def test_curves_without_snapshots(tmp_path: Path) -> None:
         curves.main([str(tmp_path)])
 
 
-def test_seg_iou_of_a_checkpoint(tmp_path: Path) -> None:
+class _OracleHead(torch.nn.Module):
+    """Stands in for the segmentation head when the "BEV" it gets is the rasterised truth
+    (1, K, X, Y) in {0, 1}: logits of the truth itself, of nothing, or of every cell."""
+
+    def __init__(self, predicts: str) -> None:
+        super().__init__()
+        self.predicts = predicts
+
+    def forward(self, truth: torch.Tensor) -> torch.Tensor:
+        if self.predicts == "truth":
+            return 2 * truth - 1  # > 0 exactly on the truth's cells
+        return torch.full_like(truth, -1.0 if self.predicts == "nothing" else 1.0)
+
+
+def test_seg_iou_of_a_checkpoint(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """seg_iou (the checkpoint README's IoU figures) against known answers: with the head's
+    input replaced by the rasterised truth of each frame, a head that returns the truth scores
+    100 on every class, one that predicts nothing 0, and one that predicts every cell each
+    class's share of the cells pooled over all frames (computed here from the truths)."""
+    import icmapper.models.network as network
+    import icmapper.training.bevcache as bevcache
+
     train(config_from_dict(TINY6), 1, tmp_path, progress=False)
-    iou = diagnostics.seg_iou(tmp_path / "stage1.pt", "sim:val:1")
-    assert set(iou) == {"ped_crossing", "divider", "boundary"}
-    assert all(0.0 <= v <= 100.0 for v in iou.values())
+    ckpt = tmp_path / "stage1.pt"
+    iou = diagnostics.seg_iou(ckpt, "sim:val:1")  # the real network: any value, but a number
+    assert set(iou) == set(CLASS_NAMES) and all(0.0 <= v <= 100.0 for v in iou.values())
+
+    loaded = network.load_network(ckpt)
+    cfg, rng = loaded.model, loaded.rng
+    truths: list[torch.Tensor] = []  # (K, X, Y) bool per frame
+
+    def truth_stream(det: object, item: dict) -> Iterator[torch.Tensor]:
+        for g in item["gt"]:
+            t = diagnostics.rasterise(g["points"], g["classes"], cfg.bev_x, cfg.bev_y,
+                                      rng.half_x, rng.half_y, cfg.num_classes) > 0.5  # fmt: skip
+            truths.append(t)
+            yield t[None].float()  # (1, K, X, Y)
+
+    monkeypatch.setattr(bevcache, "stream_bev", truth_stream)
+    for predicts in ("truth", "nothing", "everything"):
+        loaded.net.detector.seg = _OracleHead(predicts)
+        monkeypatch.setattr(network, "load_network", lambda path, *a, **k: loaded)
+        truths.clear()
+        got = diagnostics.seg_iou(ckpt, "sim:val:1")
+        pooled = torch.stack(truths).float()  # (frames, K, X, Y)
+        share = 100 * pooled.mean(dim=(0, 2, 3))  # (K,) truth cells / all cells
+        assert len(truths) > 10 and bool((share > 0).all())  # every class is on this drive
+        want = {"truth": torch.full_like(share, 100.0), "nothing": torch.zeros_like(share),
+                "everything": share}[predicts]  # fmt: skip
+        for k, name in enumerate(CLASS_NAMES):
+            assert got[name] == pytest.approx(float(want[k]), rel=1e-5, abs=1e-9), predicts
+
+    monkeypatch.undo()
     raw = {**TINY6, "model": {**TINY6["model"], "seg_head": False}, "stage1": {"steps": 1}}
     train(config_from_dict(raw), 1, tmp_path / "noseg", progress=False)
     with pytest.raises(ValueError, match="no segmentation head"):
