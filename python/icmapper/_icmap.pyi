@@ -251,6 +251,24 @@ class GlobalMap:
         TypeError if ``other`` is not a GlobalMap. The GIL is released (the overlap tests and
         the groups' merges run in parallel)."""
 
+    def absorb(
+        self,
+        ids: Sequence[int],
+        gate: float = 1.0,
+        min_overlap: float = 0.5,
+        tolerance: float = 3.0,
+    ) -> list[tuple[int, int]]:
+        """Absorbs duplicates around the instances ``ids`` (unknown ids skipped): an instance
+        overlapping a same-class neighbour (the overlap test of ``merge_map``: the larger of the
+        two shares of points within ``gate`` metres of the other, at least ``min_overlap``)
+        becomes part of it. Of a pair the instance with more points keeps its id (ties: the
+        lower id) and takes the other's geometry by ``merge_map``'s class rule (a polyline merge
+        only when faithful within ``tolerance``, crossings by union); observations add up,
+        frames span both, drives are the union; the other is removed. Neighbours are tried by
+        larger share, smaller mean distance, lower id; a keeper is checked again. Returns the
+        ``(absorbed, into)`` pairs in the order they happened (follow chains). Deterministic.
+        ValueError for bad parameters (as ``merge_map``); the GIL is released."""
+
     def ids(self) -> npt.NDArray[np.uint64]:
         """All instance ids, ascending: (k,) uint64."""
 

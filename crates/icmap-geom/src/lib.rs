@@ -8,6 +8,7 @@
 //! coordinates in `f64`, poses as `(x, y, yaw)` ego -> world, classes `0 ped_crossing` (closed
 //! polygon), `1 divider`, `2 boundary` (open polylines).
 
+pub mod absorb;
 pub mod chamfer;
 pub mod clip;
 pub mod error;

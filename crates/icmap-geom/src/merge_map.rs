@@ -132,7 +132,7 @@ const BLOCK: usize = 8;
 /// An instance's geometry prepared for point-distance queries: its segments (a ring's closing edge
 /// included) in blocks of [`BLOCK`] with bounding boxes, so that blocks farther than the cutoff
 /// are skipped.
-struct Outline<'a> {
+pub(crate) struct Outline<'a> {
     pts: &'a [Point],
     closed: bool,
     /// Per block: min x, min y, max x, max y of its segments' end points.
@@ -140,7 +140,7 @@ struct Outline<'a> {
 }
 
 impl<'a> Outline<'a> {
-    fn new(inst: &'a Instance) -> Self {
+    pub(crate) fn new(inst: &'a Instance) -> Self {
         Self::of(&inst.points, inst.closed)
     }
 
@@ -246,7 +246,7 @@ fn directed(pts: &[Point], outline: &Outline<'_>, gate: f64) -> (usize, f64) {
 
 /// The overlap of two instances: `(max(s(a, b), s(b, a)), mean distance within the gate)` (see
 /// the module docs).
-fn overlap(a: &Outline<'_>, b: &Outline<'_>, gate: f64) -> (f64, f64) {
+pub(crate) fn overlap(a: &Outline<'_>, b: &Outline<'_>, gate: f64) -> (f64, f64) {
     let (ca, sa) = directed(a.pts, b, gate);
     let (cb, sb) = directed(b.pts, a, gate);
     let share = (ca as f64 / a.pts.len() as f64).max(cb as f64 / b.pts.len() as f64);
@@ -341,7 +341,7 @@ fn faithful(merged: &[Point], a: &[Point], b: &[Point], tol: f64) -> bool {
 /// keeps the base's parts outside the other's projection, so the roles matter when the two only
 /// partly overlap), the first that is [`faithful`] within `tolerance`; neither is an error
 /// (the member is left out of the group).
-fn merge_geometry(
+pub(crate) fn merge_geometry(
     closed: bool,
     current: &[Point],
     detected: &[Point],

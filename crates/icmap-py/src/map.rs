@@ -412,6 +412,25 @@ impl PyGlobalMap {
         Ok(d)
     }
 
+    /// Absorbs the duplicates around the instances `ids` (see `icmap_geom::absorb`): returns the
+    /// `(absorbed, into)` pairs in order. Unknown ids are skipped; the GIL is released.
+    #[pyo3(signature = (ids, gate = 1.0, min_overlap = 0.5, tolerance = 3.0))]
+    fn absorb(
+        &self,
+        py: Python<'_>,
+        ids: Vec<u64>,
+        gate: f64,
+        min_overlap: f64,
+        tolerance: f64,
+    ) -> PyResult<Vec<(u64, u64)>> {
+        let params = MergeMapParams {
+            gate,
+            min_overlap,
+            tolerance,
+        };
+        py.detach(|| self.write()?.absorb(&ids, params).py_err())
+    }
+
     /// The native map file's contents (format 2; `compact`: coordinates on a 0.1 mm grid).
     #[pyo3(signature = (compact = false))]
     fn to_bytes<'py>(&self, py: Python<'py>, compact: bool) -> PyResult<Bound<'py, PyBytes>> {
