@@ -446,3 +446,41 @@ def test_eval_of_a_file_without_ids_says_so(
     assert main(["eval", str(run_dir)]) == 0
     cap = capsys.readouterr()
     assert "no track ids" not in cap.err
+
+
+# ---------------------------------------------------------------- 12, 18. progress
+def test_city_run_reports_frames(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from icmapper.data.sources import open_source
+
+    monkeypatch.setenv("ICMAPPER_PROGRESS", "lines")
+    n = sum(len(s) for s in open_source("sim-city:val:0:2", render=False))
+    args = ["map", "--source", "sim-city:val:0:2", "--detections", "oracle:low"]
+    assert main([*args, "--city", str(tmp_path / "c"), "--image-size", "32", "88"]) == 0
+    err = capsys.readouterr().err
+    assert f"city c: started, 0/{n} frame" in err and f"city c: done, {n}/{n} frame" in err
+
+
+def test_python_api_progress_callbacks(tmp_path: Path) -> None:
+    from icmapper.city.drives import CitySettings
+    from icmapper.city.run import build_city
+    from icmapper.data.sources import open_source
+    from icmapper.mapping.config import MapperConfig
+    from icmapper.mapping.mapper import Mapper
+    from icmapper.mapping.oracle import OracleDetector
+    from icmapper.mapping.run import map_sequence
+
+    seq = open_source("sim:test:1", render=False)[0]
+    calls: list[tuple[int, int]] = []
+    mapper = Mapper(OracleDetector(seq, noise="low"), config=MapperConfig())
+    map_sequence(mapper, seq, False, on_frame=lambda done, total: calls.append((done, total)))
+    assert calls == [(t + 1, len(seq)) for t in range(len(seq))]
+    settings = CitySettings("icmapper", "oracle:low", None, MapperConfig().to_dict(), (32, 88))
+    city: list[tuple[int, int]] = []
+    build_city(
+        tmp_path / "c", ["sim-city:val:0:2"], settings, "60x30", pictures=False,
+        log=lambda *_: None, progress=False, on_frame=lambda d, t: city.append((d, t)),
+    )  # fmt: skip
+    total = sum(len(s) for s in open_source("sim-city:val:0:2", render=False))
+    assert city == [(k + 1, total) for k in range(total)]

@@ -78,6 +78,7 @@ def cmd_city(args: argparse.Namespace, config: Any, image_size: tuple[int, int])
         mode=args.city_mode,
         workers=args.workers,
         ray_address=args.ray_address,
+        progress=not args.no_progress,
     )
     ok = len(manifest.ok_drives())
     print(f"wrote {args.city}: city map of {ok} drive(s) ({len(manifest.drives) - ok} failed)")

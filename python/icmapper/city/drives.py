@@ -11,7 +11,10 @@ import time
 import traceback
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from icmapper.mapping.run import FrameCallback
 
 
 @dataclass(frozen=True)
@@ -31,12 +34,13 @@ class CitySettings:
 @dataclass(frozen=True)
 class DriveTask:
     """Drive ``index`` (its id in the city map's provenance): sequence ``sequence`` of source
-    ``spec``, written to the run folder ``run_dir``."""
+    ``spec`` (``frames`` keyframes), written to the run folder ``run_dir``."""
 
     index: int
     spec: str
     sequence: str
     run_dir: str
+    frames: int = 0
 
 
 @dataclass
@@ -87,13 +91,19 @@ class DriveMapper:
             raise ValueError(f"source {spec!r} has no sequence {name!r}")
         return by_name[name]
 
-    def map_drive(self, task: DriveTask, start_map: bytes | None = None) -> DriveOutcome:
+    def map_drive(
+        self,
+        task: DriveTask,
+        start_map: bytes | None = None,
+        on_frame: FrameCallback | None = None,
+    ) -> DriveOutcome:
         """Maps one drive into its run folder; never raises for a failing drive (the outcome
         says "failed" and why). ``start_map``: continue this map (native bytes) instead of
-        starting empty ("continue" mode; the method must support it)."""
+        starting empty ("continue" mode; the method must support it). ``on_frame``: called
+        after every frame with (frames done, frames of the drive)."""
         t0 = time.perf_counter()
         try:
-            return self._map(task, start_map, t0)
+            return self._map(task, start_map, t0, on_frame)
         except Exception as exc:  # a bad drive is reported, the city goes on without it
             where = traceback.extract_tb(exc.__traceback__)[-1]
             return DriveOutcome(
@@ -103,7 +113,13 @@ class DriveMapper:
                 seconds=time.perf_counter() - t0,
             )
 
-    def _map(self, task: DriveTask, start_map: bytes | None, t0: float) -> DriveOutcome:
+    def _map(
+        self,
+        task: DriveTask,
+        start_map: bytes | None,
+        t0: float,
+        on_frame: FrameCallback | None,
+    ) -> DriveOutcome:
         from icmapper._icmap import GlobalMap
         from icmapper.eval.runfmt import RunWriter
         from icmapper.mapping.run import map_sequence
@@ -121,7 +137,9 @@ class DriveMapper:
             tracker.reserve_ids(int(ids.max()) + 1 if len(ids) else 0)
             restore(gmap, alias={})
             before = {int(i): gmap.info(int(i))["observations"] for i in ids.tolist()}
-        frames, gmap = map_sequence(method, seq, self.inp.needs_images, reset=False)
+        frames, gmap = map_sequence(
+            method, seq, self.inp.needs_images, reset=False, on_frame=on_frame
+        )
         if start_map is None:
             gmap.tag_drive(task.index)
         else:  # the instances this drive inserted or merged into

@@ -19,7 +19,7 @@ from __future__ import annotations
 import os
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from icmapper.city.drives import CitySettings, DriveMapper, DriveOutcome, DriveTask
 from icmapper.city.manifest import (
@@ -32,6 +32,9 @@ from icmapper.city.manifest import (
     write_manifest,
 )
 from icmapper.city.reduce import merge_bytes, tree_reduce
+
+if TYPE_CHECKING:
+    from icmapper.mapping.run import FrameCallback
 
 
 def _drive_tasks(
@@ -53,7 +56,7 @@ def _drive_tasks(
                 continue
             done.add(seq.name)
             run = city / "drives" / f"{index:04d}-{seq.name}"
-            tasks.append(DriveTask(index, spec, seq.name, str(run)))
+            tasks.append(DriveTask(index, spec, seq.name, str(run), len(seq)))
             index += 1
     return tasks
 
@@ -81,11 +84,15 @@ def build_city(
     ray_address: str | None = None,
     pictures: bool = True,
     log: Any = print,
+    progress: bool = True,
+    on_frame: FrameCallback | None = None,
 ) -> CityManifest:
     """Maps the drives of ``specs`` that the city run in ``city`` does not hold yet and updates
     its city map (see the module docstring). ``workers`` > 0 runs merge-mode drives on Ray (a
-    local instance, or the cluster at ``ray_address``); 0 runs them in-process. Returns the
-    manifest."""
+    local instance, or the cluster at ``ray_address``); 0 runs them in-process, reporting every
+    frame: a progress bar or lines (``progress``; ``icmapper.progress``) and ``on_frame``
+    (frames done, frames of all new drives), the Python API's opt-in callback. On Ray, drives
+    report as they finish. Returns the manifest."""
     from icmapper._icmap import GlobalMap
     from icmapper.data.sources import resolve_spec
     from icmapper.mapping.config import MapperConfig
@@ -110,12 +117,13 @@ def build_city(
     city_map = city / CITY_MAP
     current = GlobalMap.load(str(city_map)).to_bytes() if city_map.is_file() else None
     log(f"city {city}: {len(tasks)} new drive(s), {len(manifest.drives)} already mapped")
+    ticks = _FrameTicks(tasks, city, progress and not (workers and mode == "merge"), on_frame)
     if mode == "continue":
         if workers:
             log("note: continue mode maps drives one after another (workers ignored)")
         mapper = DriveMapper(settings)
         for task in tasks:
-            outcome = mapper.map_drive(task, start_map=current)
+            outcome = mapper.map_drive(task, start_map=current, on_frame=ticks.of(task))
             _record(manifest, task, outcome, city, log)
             if outcome.map_bytes is not None:
                 current = outcome.map_bytes
@@ -130,7 +138,7 @@ def build_city(
             )
         else:
             mapper = DriveMapper(settings)
-            outcomes = [mapper.map_drive(t) for t in tasks]
+            outcomes = [mapper.map_drive(t, on_frame=ticks.of(t)) for t in tasks]
             maps = [o.map_bytes for o in sorted(outcomes, key=lambda o: o.index) if o.map_bytes]
             merged = (
                 tree_reduce(maps, lambda a, b: merge_bytes(a, b, gate, min_overlap, tol))
@@ -143,6 +151,7 @@ def build_city(
             current = merge_bytes(current, merged, gate, min_overlap, tol) if current else merged
             GlobalMap.from_bytes(current).save(str(city_map), compact=True)
         write_manifest(city, manifest)
+    ticks.close()
     failed = [d for d in manifest.drives if d.status != "ok"]
     if failed:
         log(f"{len(failed)} drive(s) failed and are left out of the city map:")
@@ -151,6 +160,46 @@ def build_city(
     if current is not None:
         _write_outputs(city, manifest, GlobalMap.from_bytes(current), settings, pictures)
     return manifest
+
+
+class _FrameTicks:
+    """Frame progress over every new drive of a city run (mapped in-process, one after another):
+    the bar (or lines) and the caller's ``on_frame(done, total)``."""
+
+    def __init__(
+        self,
+        tasks: list[DriveTask],
+        city: Path,
+        show: bool,
+        on_frame: FrameCallback | None,
+    ) -> None:
+        from icmapper.progress import progress
+
+        self.base: dict[int, int] = {}  # drive index -> frames of the drives before it
+        acc = 0
+        for t in tasks:
+            self.base[t.index] = acc
+            acc += t.frames
+        self.total, self.done = acc, 0
+        self.on_frame = on_frame
+        self.bar = progress(self.total, f"city {city.name}", unit="frame", enabled=show)
+
+    def of(self, task: DriveTask) -> FrameCallback:
+        """The ``on_frame`` callback of ``map_drive`` for ``task``."""
+
+        def frame(done: int, of: int) -> None:
+            del of
+            to = self.base[task.index] + done
+            if to > self.done:
+                self.bar.update(to - self.done)
+                self.done = to
+                if self.on_frame is not None:
+                    self.on_frame(self.done, self.total)
+
+        return frame
+
+    def close(self) -> None:
+        self.bar.close()
 
 
 def _record(

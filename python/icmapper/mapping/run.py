@@ -222,6 +222,10 @@ class DetectionInput:
         return RANGE_60x30
 
 
+#: A progress callback of the Python API's long loops: called after every frame with (frames
+#: done, frames in all), e.g. ``map_sequence(..., on_frame=lambda done, n: print(done, n))``.
+FrameCallback = Callable[[int, int], None]
+
 #: (sequence, recorded detections or None) -> (method, its recorder or None)
 MethodFactory = Callable[
     [Sequence, dict[int, Detections] | None], tuple[MappingMethod, RecordingSource | None]
@@ -339,11 +343,15 @@ def map_sequence(
     with_images: bool,
     progress: Any = None,
     reset: bool = True,
+    on_frame: FrameCallback | None = None,
 ) -> tuple[list[Any], Any]:
     """Runs one method over one sequence: (per-frame FramePredictions, global map).
-    ``reset=False`` continues the method's current state (a city map continued drive after
-    drive: the caller resets it and loads the map first)."""
+    ``progress``: a bar (``icmapper.progress``) advanced by one per frame; ``on_frame``: a
+    callback (frames done, frames of the sequence) after every frame (opt-in progress for the
+    Python API). ``reset=False`` continues the method's current state (a city map continued
+    drive after drive: the caller resets it and loads the map first)."""
     from icmapper.eval.runfmt import FramePredictions
+    from icmapper.mapping.map_nms import map_nms
 
     if reset:
         method.reset()
@@ -366,4 +374,6 @@ def map_sequence(
         )
         if progress is not None:
             progress.update(1)
+        if on_frame is not None:
+            on_frame(i + 1, len(seq))
     return frames, method.finish()
