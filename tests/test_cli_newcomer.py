@@ -484,3 +484,41 @@ def test_python_api_progress_callbacks(tmp_path: Path) -> None:
     )  # fmt: skip
     total = sum(len(s) for s in open_source("sim-city:val:0:2", render=False))
     assert city == [(k + 1, total) for k in range(total)]
+
+
+# ---------------------------------------------------------------- 11. one GeoJSON schema
+def test_every_geojson_has_one_schema(
+    run_dir: Path, cities: dict[str, Path], tmp_path: Path
+) -> None:
+    from icmapper._icmap import GlobalMap
+    from icmapper.georef import GEOJSON_SCHEMA, write_map_geojsons
+
+    m = GlobalMap()
+    m.insert(1, np.array([[0.0, 0.0], [30.0, 0.5]]))
+    m.insert(0, np.array([[10.0, 10.0], [14.0, 10.0], [14.0, 13.0], [10.0, 13.0]]))
+    local, wgs = write_map_geojsons(m, tmp_path / "m", "PIT")
+    docs = {
+        "local": json.loads(local.read_text()),
+        "wgs84": json.loads(wgs.read_text()),
+        "run": json.loads(next(run_dir.glob("*.geojson")).read_text()),
+        "city": json.loads((cities["merge"] / "city.geojson").read_text()),
+    }
+    keys = {"id", "class", "class_id", "closed", "n_points", "first_frame", "last_frame"}
+    keys |= {"observations", "drives"}
+    for name, doc in docs.items():
+        member = doc["icmapper"]
+        assert member["schema"] == GEOJSON_SCHEMA and member["version"] == 1, name
+        assert {"crs", "local_frame", "conversion"} <= set(member), name
+        for f in doc["features"]:
+            props = f["properties"]
+            assert set(props) == keys, (name, sorted(props))
+            assert f["id"] == props["id"] and isinstance(props["class"], str), name
+    assert (
+        "not WGS84" in docs["local"]["icmapper"]["crs"]
+        and "PIT" in docs["local"]["icmapper"]["crs"]
+    )
+    assert "RFC 7946" in docs["wgs84"]["icmapper"]["crs"]
+    assert "synthetic" in docs["run"]["icmapper"]["crs"]
+    assert any(f["properties"]["drives"] for f in docs["city"]["features"])
+    line = next(f for f in docs["local"]["features"] if f["properties"]["class"] == "divider")
+    assert line["geometry"]["coordinates"] == m.get(line["id"])[1].tolist()  # as stored

@@ -1,5 +1,6 @@
-"""Geo-referencing: a dataset's local map frame -> WGS84 longitude / latitude, and GeoJSON export of
-a global map in WGS84 (RFC 7946) beside the engine's local-frame export.
+"""Geo-referencing: a dataset's local map frame -> WGS84 longitude / latitude, and the GeoJSON of a
+global map: one schema (``map_geojson``) for every map file the project writes, in the local
+frame and, where the frame is located, in WGS84 (RFC 7946).
 
 Each ``GeoFrame`` is one published origin of a dataset's frames, in the ``GEO_FRAMES`` registry:
 - Argoverse 2 cities (ATX, DTW, MIA, PAO, PIT, WDC): the city frame is UTM (WGS84 ellipsoid, the
@@ -148,43 +149,100 @@ for _loc, (_lat, _lon) in NUSCENES_LOCATIONS.items():
 
 
 # ---------------------------------------------------------------------- export
-def geojson_wgs84(gmap: GlobalMap, frame: str) -> dict[str, Any]:
-    """The global map as an RFC 7946 FeatureCollection in WGS84 (lon, lat) degrees: one feature
-    per instance (LineString, or Polygon for a crossing) with id, class and bookkeeping; the CRS
-    and the local frame are named in the foreign member ``icmapper``."""
+#: The one GeoJSON schema of every map file the project writes (docs/data.md, "GeoJSON"): run
+#: folders' ``<seq>.geojson`` / ``<seq>.wgs84.geojson`` and city runs' ``city.geojson`` /
+#: ``city.wgs84.geojson``.
+GEOJSON_SCHEMA = "icmapper-map-geojson"
+GEOJSON_VERSION = 1
+
+
+def _geometry(coords: list[list[float]], closed: bool) -> dict[str, Any]:
+    """A LineString, or for a crossing a Polygon whose ring is closed and counter-clockwise (the
+    exterior orientation RFC 7946 asks for)."""
+    if not closed:
+        return {"type": "LineString", "coordinates": coords}
+    ring = coords + [coords[0]]
+    area2 = sum(a[0] * b[1] - b[0] * a[1] for a, b in zip(ring[:-1], ring[1:], strict=True))
+    return {"type": "Polygon", "coordinates": [ring if area2 >= 0 else ring[::-1]]}
+
+
+def map_geojson(gmap: GlobalMap, local_frame: str = "", wgs84: bool = False) -> dict[str, Any]:
+    """The global map as a GeoJSON FeatureCollection, one feature per instance (LineString, or
+    Polygon for a crossing), ``id`` on the feature and in its properties; the same properties in
+    every file: ``id``, ``class`` (its name), ``class_id`` (0 ped_crossing, 1 divider,
+    2 boundary), ``closed``, ``n_points``, ``first_frame``, ``last_frame``, ``observations``,
+    ``drives`` (the city drives that observed it; [] in a single run). The foreign member
+    ``icmapper`` names the schema and the frame: ``crs``, ``local_frame`` (a ``GEO_FRAMES``
+    name, or "" for a synthetic city) and ``conversion``.
+
+    wgs84: longitude / latitude in degrees (RFC 7946; 9 decimals), converted from the located
+    ``local_frame``; else the local map frame's metres as stored (not WGS84, so not RFC 7946's
+    CRS: GIS tools need the frame named in ``crs``)."""
     from icmapper.data.types import CLASS_NAMES
 
-    gf = geo_frame(frame)
+    gf = geo_frame(local_frame) if wgs84 else None
     features = []
     for i in gmap.ids().tolist():
         cls, pts = gmap.get(int(i))
         info = gmap.info(int(i))
-        ll = gf.to_lonlat(np.asarray(pts, np.float64))  # (n, 2)
-        coords = [[round(float(x), 9), round(float(y), 9)] for x, y in ll]
-        if int(cls) == 0:  # a crossing ring: closed, counter-clockwise exterior per RFC 7946
-            ring = coords + [coords[0]]
-            area2 = sum(a[0] * b[1] - b[0] * a[1] for a, b in zip(ring[:-1], ring[1:], strict=True))
-            if area2 < 0:
-                ring = ring[::-1]
-            geometry: dict[str, Any] = {"type": "Polygon", "coordinates": [ring]}
+        xy = np.asarray(pts, np.float64)  # (n, 2)
+        if gf is None:
+            coords = xy.tolist()
         else:
-            geometry = {"type": "LineString", "coordinates": coords}
-        props: dict[str, Any] = {"id": int(i), "class": CLASS_NAMES[int(cls)]}
+            coords = [[round(float(x), 9), round(float(y), 9)] for x, y in gf.to_lonlat(xy)]
+        props: dict[str, Any] = {"id": int(i), "class": CLASS_NAMES[int(cls)], "class_id": int(cls)}
         props.update({k: v for k, v in info.items() if k not in ("id", "cls")})
         features.append(
-            {"type": "Feature", "id": int(i), "geometry": geometry, "properties": props}
+            {
+                "type": "Feature",
+                "id": int(i),
+                "geometry": _geometry(coords, bool(info["closed"])),
+                "properties": props,
+            }
         )
+    if gf is not None:
+        crs = "WGS84 longitude, latitude in degrees (RFC 7946; EPSG:4326 axis order lon, lat)"
+        conversion = gf.describe
+    else:
+        where = f"{local_frame}'s" if local_frame else "a synthetic city's (no place on Earth)"
+        crs = f"local map frame, metres: {where} x, y (not WGS84)"
+        conversion = "none: the map frame's coordinates as stored"
     return {
         "type": "FeatureCollection",
         "features": features,
         "icmapper": {
-            "crs": "WGS84 longitude, latitude in degrees (RFC 7946; EPSG:4326 axis order lon, lat)",
-            "local_frame": frame,
-            "conversion": gf.describe,
+            "schema": GEOJSON_SCHEMA,
+            "version": GEOJSON_VERSION,
+            "crs": crs,
+            "local_frame": local_frame,
+            "conversion": conversion,
         },
     }
 
 
+def geojson_wgs84(gmap: GlobalMap, frame: str) -> dict[str, Any]:
+    """``map_geojson`` in WGS84 from the located ``frame``."""
+    return map_geojson(gmap, frame, wgs84=True)
+
+
+def write_map_geojson(
+    gmap: GlobalMap, path: str | Path, local_frame: str = "", wgs84: bool = False
+) -> None:
+    """Writes ``map_geojson`` to ``path`` atomically."""
+    write_text_atomic(path, json.dumps(map_geojson(gmap, local_frame, wgs84)))
+
+
 def write_geojson_wgs84(gmap: GlobalMap, frame: str, path: str | Path) -> None:
     """Writes ``geojson_wgs84`` to ``path`` atomically (temp file in the folder + rename)."""
-    write_text_atomic(path, json.dumps(geojson_wgs84(gmap, frame)))
+    write_map_geojson(gmap, path, frame, wgs84=True)
+
+
+def write_map_geojsons(gmap: GlobalMap, stem: Path, local_frame: str) -> list[Path]:
+    """What a run or city writes for a map: ``<stem>.geojson`` in the local frame, and
+    ``<stem>.wgs84.geojson`` where ``local_frame`` is located. Returns the paths written."""
+    out = [stem.with_name(stem.name + ".geojson")]
+    write_map_geojson(gmap, out[0], local_frame)
+    if local_frame in GEO_FRAMES:
+        out.append(stem.with_name(stem.name + ".wgs84.geojson"))
+        write_map_geojson(gmap, out[1], local_frame, wgs84=True)
+    return out

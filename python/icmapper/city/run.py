@@ -237,16 +237,13 @@ def _write_outputs(
 
     from icmapper.data import gt as gt_mod
     from icmapper.data.types import PerceptionRange
-    from icmapper.georef import GEO_FRAMES, write_geojson_wgs84
+    from icmapper.georef import write_map_geojsons
     from icmapper.mapping.plot import plot_global_maps
 
-    gmap.to_geojson(str(city / "city.geojson"))
     seqs = city_sequences(manifest, settings.image_size)
+    write_map_geojsons(gmap, city / "city", seqs[0].world.geo if seqs else "")  # local (+ WGS84)
     if not seqs:
         return
-    geo = seqs[0].world.geo
-    if geo in GEO_FRAMES:
-        write_geojson_wgs84(gmap, geo, city / "city.wgs84.geojson")
     if pictures:
         rng = PerceptionRange.from_name(manifest.range_name)
         gap = np.full((1, 4, 4), np.nan)  # breaks the drawn path between drives

@@ -76,7 +76,7 @@ def run_methods(
     run folders."""
     from icmapper.data import gt as gt_mod
     from icmapper.eval.runfmt import RunWriter
-    from icmapper.georef import GEO_FRAMES, write_geojson_wgs84
+    from icmapper.georef import write_map_geojsons
     from icmapper.mapping.config import MapperConfig
     from icmapper.mapping.plot import plot_global_maps
     from icmapper.mapping.run import DetectionInput, map_sequence, method_factory
@@ -110,9 +110,7 @@ def run_methods(
             if recorder is not None and records is None:
                 records = recorder.records
             writers[m].add_sequence(seq.name, frames, gmap)
-            gmap.to_geojson(str(out / m / f"{seq.name}.geojson"))  # the local map frame
-            if seq.world.geo in GEO_FRAMES:  # and WGS84 where the frame's origin is known
-                write_geojson_wgs84(gmap, seq.world.geo, out / m / f"{seq.name}.wgs84.geojson")
+            write_map_geojsons(gmap, out / m / seq.name, seq.world.geo)  # local (+ WGS84)
             if pictures:
                 plot_global_maps(
                     gmap,
