@@ -16,6 +16,7 @@ from numpy.typing import NDArray
 
 from icmapper.eval.consistency import consistency_map
 from icmapper.eval.detection import THRESHOLDS, detection_ap, match
+from icmapper.eval.fragmentation import fragmentation
 from icmapper.eval.globalmap import CD_CAP, CD_STEP, global_metrics, load_global_map
 from icmapper.eval.instances import Instances
 from icmapper.eval.runfmt import FramePredictions, Run, RunFormatError, read_run
@@ -162,6 +163,7 @@ def evaluate(
             gp = [_as_global(g, scored=True) for g in global_pred]  # type: ignore[arg-type]
             gg = [_as_global(g, scored=False) for g in global_gt]
             result["mapping"] = global_metrics(gp, gg, thresholds, CD_STEP, CD_CAP)
+            result["mapping"]["fragmentation"] = fragmentation(gp, gg)
     return result
 
 

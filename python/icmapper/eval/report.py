@@ -90,6 +90,32 @@ def mapping_table(results: Sequence[dict]) -> str:
     return _table(header, rows)
 
 
+def cleanliness_table(results: Sequence[dict]) -> str:
+    """Per class: the map's instances / the ground truth's (their ratio), pieces per covered
+    ground-truth instance, and the share of map instances that duplicate another (x100)
+    (``eval.fragmentation``)."""
+    header = ["Method", "Range"]
+    for c in CLASS_NAMES:
+        s = _SHORT[c]
+        header += [f"n_{s}", f"pieces_{s}", f"dup_{s}"]
+    rows = []
+    for r in results:
+        fr = (r.get("mapping") or {}).get("fragmentation")
+        if fr is None:
+            rows.append([_name(r), r["range"]] + ["-"] * (3 * len(CLASS_NAMES)))
+            continue
+        row = [_name(r), r["range"]]
+        for c in CLASS_NAMES:
+            n = fr["count"][c]
+            row += [
+                f"{n['map']}/{n['gt']} ({_fmt(n['ratio'], 1, 2)})",
+                _fmt(fr["pieces"][c], 1, 2),
+                _fmt(fr["duplicates"][c], 100),
+            ]
+        rows.append(row)
+    return _table(header, rows)
+
+
 def markdown(results: Sequence[dict], cmap: str = "icmapper") -> str:
     """The three tables, titled, one row per result (method and range); ``cmap``: the C-mAP
     columns of Table 1 (``detection_table``)."""
@@ -100,5 +126,7 @@ def markdown(results: Sequence[dict], cmap: str = "icmapper") -> str:
         tracking_table(results),
         "### Global map (CD m, lower is better; mGAP x100)",
         mapping_table(results),
+        "### Map cleanliness (instances map/GT (ratio), pieces per GT instance, duplicates x100)",
+        cleanliness_table(results),
     ]
     return "\n\n".join(parts) + "\n"
