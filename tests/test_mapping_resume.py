@@ -15,7 +15,7 @@ from icmapper.data.sources import open_source
 from icmapper.data.types import Sequence
 from icmapper.mapping.config import MapperConfig
 from icmapper.mapping.mapper import Mapper
-from icmapper.mapping.state import state_path
+from icmapper.mapping.state import STATE_VERSION, state_path
 from icmapper.mapping.types import StepResult
 
 REPO = Path(__file__).resolve().parents[1]
@@ -197,7 +197,7 @@ def test_corrupt_sidecar_refused(tmp_path: Path, sim_seq: Sequence) -> None:
     old = {k: v for k, v in arrays.items() if k != "crossing_counts"}
     with sidecar.open("wb") as fh:
         np.savez(fh, **dict(old, version=np.array(1, np.int64)))
-    with pytest.raises(ValueError, match="format version 1, this build reads 2"):
+    with pytest.raises(ValueError, match=f"format version 1, this build reads {STATE_VERSION}"):
         victim.resume(path)
 
     # the intact pair still resumes

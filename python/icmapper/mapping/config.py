@@ -42,6 +42,22 @@ class MapperConfig:
         "instance already covers as it is: the car has passed it, the map holds a nearer view "
         "(mapping.passed; 0: the newest view replaces everything it overlaps)",
     )
+    absorb_gate: float = _f(
+        1.0,
+        "metres; absorption (IC-Mapper's absorb, every method's map_nms): a point within this "
+        "gate of a same-class neighbour lies on it",
+    )
+    absorb_overlap: float = _f(
+        0.5, "absorption: share of an instance's points lying on a neighbour to join the two"
+    )
+    absorb_tolerance: float = _f(
+        3.0, "absorption: metres a joining polyline merge may move any point of either instance"
+    )
+    map_nms: bool = _f(
+        False,
+        "clean-up of the finished map, for every method: absorb every instance that lies on a "
+        "same-class neighbour (mapping.map_nms)",
+    )
     positional_scale: float = _f(
         1.0, "metres; positional affinity exp(-chamfer/scale) (no query features, Post-Track)"
     )
@@ -58,6 +74,11 @@ class MapperConfig:
         True,
         "re-identification maps a second new piece of an instance matched this frame into it "
         "(false: the piece stays its own track)",
+    )
+    absorb: bool = _f(
+        True,
+        "after each step, an instance the step touched and a same-class neighbour it lies on "
+        "over most of its length become one (GlobalMap.absorb with the absorb_* settings)",
     )
     fusion_margin: float = _f(
         20.0, "metres around the range for the sampled history (the fusion network's own value)"
@@ -101,7 +122,7 @@ class MapperConfig:
             raise ValueError("MapperConfig.track_threshold must be >= detect_threshold")
         for name in ("positional_scale", "spacing", "history_points", "gate", "splice_overlap",
                      "vma_overlap", "cluster_eps", "polymerge_buffer", "city_gate",
-                     "city_tolerance"):  # fmt: skip
+                     "city_tolerance", "absorb_tolerance", "absorb_gate"):  # fmt: skip
             if not getattr(self, name) > 0:
                 raise ValueError(f"MapperConfig.{name} must be > 0, got {getattr(self, name)}")
         for name in ("min_hits", "cluster_min_samples"):
@@ -122,6 +143,10 @@ class MapperConfig:
         if not 0.0 < self.city_min_overlap <= 1.0:
             raise ValueError(
                 f"MapperConfig.city_min_overlap must be in (0, 1], got {self.city_min_overlap}"
+            )
+        if not 0.0 < self.absorb_overlap <= 1.0:
+            raise ValueError(
+                f"MapperConfig.absorb_overlap must be in (0, 1], got {self.absorb_overlap}"
             )
         if not 0.0 < self.reid_overlap <= 1.0:
             raise ValueError(

@@ -140,6 +140,13 @@ class CrossingMerger:
         whole = is_complete(ego, self.rng) and abs(signed_ring_area(ego)) >= MIN_VIEW_AREA
         self._counts[int(target)] = int(whole)
 
+    def absorbed(self, gone: int, into: int) -> None:
+        """Instance ``gone`` became part of ``into`` (``GlobalMap.absorb``): their complete views
+        add up."""
+        n = self._counts.pop(int(gone), 0) + self._counts.get(int(into), 0)
+        if int(into) in self._counts or n:
+            self._counts[int(into)] = n
+
     def merge(
         self,
         global_map: GlobalMap,

@@ -21,7 +21,11 @@ Per frame (paper Fig. 2):
    by curve fit; crossings by ``crossing_merge``: the running mean of complete views, union of
    views cut by the range edge that reveal more of a crossing), or insert once the
    track has been seen in ``min_hits`` frames (tentative tracks keep one-off false positives out
-   of the map; an extension like step 3).
+   of the map; an extension like step 3);
+7. absorption (``absorb``, an extension): an instance this step inserted or merged into and a
+   same-class neighbour it lies on over most of its length become one (``GlobalMap.absorb``); the
+   tracks of the absorbed instance map into the kept one. Pieces of one line that the tracker
+   kept apart (a skeleton piece, a track found again beside its instance) stop doubling the map.
 """
 
 from __future__ import annotations
@@ -122,6 +126,7 @@ class MapperStats:
     merged: int = 0
     reidentified: int = 0  # new tracks renamed to a global instance's id
     aliased: int = 0  # new tracks mapped into an instance already matched this frame
+    absorbed: int = 0  # instances absorbed into a same-class neighbour (``_absorb``)
     merge_failures: int = 0
     failures: list[str] = field(default_factory=list)
 
@@ -314,6 +319,7 @@ class Mapper:
         sec["fusion"] += t4 - t3
 
         inserted, merged = self._merge(det, track_ids, fused, was_fused, pose, frame.index)
+        self._absorb(inserted + merged)
         sec["merge"] += time.perf_counter() - t4
 
         all_ids = np.empty(len(dets), np.int64)
@@ -507,6 +513,24 @@ class Mapper:
         self.stats.inserted += len(inserted)
         self.stats.merged += len(merged)
         return inserted, merged
+
+    def _absorb(self, touched: list[int]) -> None:
+        """Instances this step inserted or merged into absorb the same-class neighbours they lie
+        on, or are absorbed by them (``GlobalMap.absorb``); the tracks of an absorbed instance
+        map into the one that took it from now on."""
+        cfg = self.config
+        if not cfg.absorb or not touched:
+            return
+        pairs = self._map.absorb(
+            sorted(set(touched)), cfg.absorb_gate, cfg.absorb_overlap, cfg.absorb_tolerance
+        )
+        for gone, into in pairs:
+            for track, target in self._alias.items():
+                if target == gone:
+                    self._alias[track] = into
+            self._alias[gone] = into
+            self.crossings.absorbed(gone, into)
+        self.stats.absorbed += len(pairs)
 
 
 def _select(d: Detections, keep: NDArray[np.bool_]) -> Detections:

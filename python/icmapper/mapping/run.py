@@ -376,4 +376,7 @@ def map_sequence(
             progress.update(1)
         if on_frame is not None:
             on_frame(i + 1, len(seq))
-    return frames, method.finish()
+    gmap = method.finish()
+    if method.config.map_nms:
+        map_nms(gmap, method.config)
+    return frames, gmap

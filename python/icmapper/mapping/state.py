@@ -31,9 +31,11 @@ if TYPE_CHECKING:
     from icmapper.mapping.mapper import Mapper, MapperStats
 
 #: Format version of the sidecar (``<map>.state.npz``).
-STATE_VERSION = 2  # 2: the crossing rule's view counts
+STATE_VERSION = 3  # 2: the crossing rule's view counts; 3: the absorbed counter
 #: Integer counters of ``MapperStats`` stored in the sidecar, in order.
-STAT_COUNTS = ("frames", "inserted", "merged", "reidentified", "aliased", "merge_failures")
+STAT_COUNTS = (
+    "frames", "inserted", "merged", "reidentified", "aliased", "absorbed", "merge_failures"
+)  # fmt: skip
 #: Arrays every sidecar holds (besides ``source.*``, the detection source's state).
 _STATE_KEYS = (
     "version", "map_sha256", "source_kind", "next_id", "untracked", "stats_counts",

@@ -15,6 +15,7 @@ from numpy.typing import NDArray
 if TYPE_CHECKING:
     from icmapper._icmap import GlobalMap
     from icmapper.data.types import Frame
+    from icmapper.mapping.config import MapperConfig
 
 
 @dataclass
@@ -82,6 +83,7 @@ class MappingMethod(Protocol):
     """A method that turns a frame stream into a global map (IC-Mapper or a baseline)."""
 
     name: str
+    config: MapperConfig  # the settings it runs with
 
     def reset(self) -> None:
         """Forget everything: a new sequence starts."""

@@ -1,0 +1,202 @@
+"""Mapping experiments on the learned detector's BEVs, cached: the clean-maps issue's tool.
+
+Runs the learned detector's encoder once per frame and caches each frame's BEV (``--cache``), so
+later runs vary the vectoriser (``--vec NAME=VALUE``, ``models.vectorise.VectoriseParams``) and
+the mapping settings (``--set NAME=VALUE``, ``MapperConfig``) without rendering or encoding again.
+Every method maps the same detections (IC-Mapper's, recorded, replayed to the baselines, as
+``icmapper compare`` does). Prints, per method, the map error, mGAP, ID switches and the
+map's cleanliness (``eval.fragmentation``); ``--json`` writes them.
+
+    .venv/bin/python scripts/map_experiment.py --source sim:val:4 \
+        --methods icmapper,post-track,polymerge --set map_nms=true
+
+A cached BEV belongs to its checkpoint and source; delete the cache when either changes.
+"""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import json
+import os
+import sys
+import time
+from dataclasses import fields, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+
+def _parse_sets(items: list[str], cls: type) -> dict[str, Any]:
+    table: dict[str, Any] = {}
+    for it in items:
+        k, _, v = it.partition("=")
+        table[k] = json.loads(v) if v not in ("true", "false") else v == "true"
+    names = {f.name for f in fields(cls)}
+    bad = set(table) - names
+    if bad:
+        raise SystemExit(f"unknown {cls.__name__} settings {sorted(bad)}")
+    return table
+
+
+class CachedBev:
+    """The learned detector as a ``DetectionSource`` whose encoder output is cached per frame."""
+
+    def __init__(self, inner: Any, cache: Path, vec: Any) -> None:
+        self.inner = inner
+        self.detector = inner.detector
+        self.cache = cache
+        self.vec = vec
+        self.bevs: dict[int, np.ndarray] = {}
+
+    def reset(self) -> None:
+        self.inner.reset()
+
+    def load(self, name: str) -> bool:
+        path = self.cache / f"{name}.npz"
+        self.bevs = dict(np.load(path)) if path.exists() else {}
+        self.bevs = {int(k): v for k, v in self.bevs.items()}
+        return bool(self.bevs)
+
+    def save(self, name: str) -> None:
+        self.cache.mkdir(parents=True, exist_ok=True)
+        tmp = self.cache / f".{name}.tmp.npz"
+        np.savez(tmp, **{str(k): v for k, v in self.bevs.items()})
+        os.replace(tmp, self.cache / f"{name}.npz")
+
+    def detect(self, frame: Any) -> Any:
+        import torch
+        from icmapper.mapping.types import Detections
+
+        if frame.index not in self.bevs:
+            inner = self.inner
+            det = inner.detector
+            imgs = torch.as_tensor(np.asarray(frame.images))[None]
+            rig = frame.rig
+            intr = torch.as_tensor(rig.intrinsics, dtype=torch.float32)[None]
+            c2e = torch.as_tensor(rig.cam_to_ego, dtype=torch.float32)[None]
+            pose = np.asarray(frame.pose, np.float64)
+            state = motion = None
+            if inner._state is not None:
+                m = np.linalg.inv(pose) @ inner._prev_pose
+                motion = torch.as_tensor(m, dtype=torch.float32)[None]
+                state = inner._state
+            with torch.no_grad():
+                bev, inner._state = det.encode_stream(imgs, intr, c2e, state, motion)
+            inner._prev_pose = pose
+            self.bevs[frame.index] = bev.numpy()
+        bev_t = torch.from_numpy(self.bevs[frame.index])
+        with torch.no_grad():
+            inst, queries = self.detector.segment_instances(bev_t, self.vec)
+        order = np.argsort(-inst.scores, kind="stable")
+        return Detections(
+            classes=inst.classes[order].astype(np.int64),
+            scores=inst.scores[order].astype(np.float32),
+            points=inst.points[order].astype(np.float32),
+            queries=queries.numpy()[order].astype(np.float32),
+        )
+
+
+def main(argv: list[str] | None = None) -> int:
+    from icmapper.checkpoints import DEFAULT_CHECKPOINT
+    from icmapper.data import gt as gt_mod
+    from icmapper.data.sources import open_source
+    from icmapper.eval.evaluate import evaluate
+    from icmapper.mapping.config import MapperConfig
+    from icmapper.mapping.mapper import Mapper
+    from icmapper.mapping.methods import method
+    from icmapper.mapping.run import RecordingSource, ReplaySource, map_sequence
+    from icmapper.models.vectorise import VectoriseParams
+
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--source", required=True)
+    ap.add_argument("--methods", default="icmapper,post-track,polymerge")
+    ap.add_argument("--checkpoint", default=str(DEFAULT_CHECKPOINT))
+    ap.add_argument("--set", action="append", default=[], metavar="NAME=VALUE")
+    ap.add_argument("--vec", action="append", default=[], metavar="NAME=VALUE")
+    ap.add_argument("--cache", default="/tmp/icmapper-bev-cache")
+    ap.add_argument("--json", default=None)
+    ap.add_argument("--maps", default=None, help="folder for each method's .icmap per drive")
+    a = ap.parse_args(argv)
+
+    vec = replace(VectoriseParams(), **_parse_sets(a.vec, VectoriseParams))
+    from icmapper.models.network import checkpoint_settings
+
+    seqs = open_source(a.source, image_size=checkpoint_settings(a.checkpoint)[1])
+    key = hashlib.sha1(f"{Path(a.checkpoint).resolve()}|{a.source}".encode()).hexdigest()[:10]
+    cache = Path(a.cache) / key
+    mapper = Mapper.from_checkpoint(a.checkpoint)
+    cfg = MapperConfig.from_dict(_parse_sets(a.set, MapperConfig), mapper.config)
+    mapper = Mapper.from_checkpoint(a.checkpoint, config=cfg)
+    rng = mapper.rng
+    src = CachedBev(mapper.source, cache, vec)
+    names = a.methods.split(",")
+    preds: dict[str, list] = {n: [] for n in names}
+    maps: dict[str, list] = {n: [] for n in names}
+    gts, ggts = [], []
+    t0 = time.time()
+    for seq in seqs:
+        cached = src.load(seq.name)
+        rec = RecordingSource(src)
+        mapper.source = rec
+        for n in names:
+            if n.startswith("icmapper"):
+                variant = "full" if n == "icmapper" else n[len("icmapper-") :]
+                m = (
+                    mapper
+                    if variant == "full"
+                    else Mapper.from_checkpoint(a.checkpoint, config=cfg, variant=variant)
+                )
+                if variant != "full":
+                    m.source = ReplaySource(rec.records) if variant == "base" else rec
+                frames, gmap = map_sequence(m, seq, with_images=not cached)
+            else:
+                b = method(n).build(ReplaySource(rec.records), cfg, rng)
+                frames, gmap = map_sequence(b, seq, with_images=False)
+            preds[n].append(frames)
+            items = []
+            for i in gmap.ids():
+                cls, pts = gmap.get(int(i))
+                obs = gmap.info(int(i)).get("observations", 1)
+                items.append((int(cls), np.asarray(pts), int(cls) == 0, float(obs or 1)))
+            maps[n].append(items)
+            if a.maps:
+                d = Path(a.maps) / n
+                d.mkdir(parents=True, exist_ok=True)
+                gmap.save(str(d / f"{seq.name}.icmap"))
+        if not cached:
+            src.save(seq.name)
+        gts.append(gt_mod.sequence_gt(seq, rng))
+        ggts.append(gt_mod.global_gt(seq, rng))
+        print(f"{seq.name}: {time.time() - t0:.0f} s", file=sys.stderr)
+    out = {}
+    print(
+        "| method | mAP | IDS | CD_ped | CD_div | CD_bound | mCD | mGAP | n ped/div/bound (GT) "
+        "| pieces | dup % | stray % |"
+    )
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
+    for n in names:
+        r = evaluate(preds[n], gts, maps[n], ggts, rng.name)
+        out[n] = r
+        mp, fr = r["mapping"], r["mapping"]["fragmentation"]
+        cn = ["ped_crossing", "divider", "boundary"]
+        cnt = "/".join(str(fr["count"][c]["map"]) for c in cn)
+        gtc = "/".join(str(fr["count"][c]["gt"]) for c in cn)
+        pcs = "/".join(f"{fr['pieces'][c]:.2f}" for c in cn)
+        dup = "/".join(f"{100 * fr['duplicates'][c]:.0f}" for c in cn)
+        stray = "/".join(f"{100 * fr['stray'][c]:.0f}" for c in cn)
+        ids = r["tracking"]["mean"]["IDS"]
+        print(
+            f"| {n} | {100 * r['detection']['mAP']:.1f} | {ids:.2f} | "
+            + " | ".join(f"{mp['CD'][c]:.3f}" for c in cn)
+            + f" | {mp['mCD']:.3f} | {100 * mp['mGAP']:.1f} | {cnt} ({gtc}) | {pcs} | {dup} "
+            f"| {stray} |"
+        )
+    if a.json:
+        Path(a.json).write_text(json.dumps(out, indent=1, default=float))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

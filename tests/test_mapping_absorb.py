@@ -1,0 +1,134 @@
+"""Absorption in the online mapper (``MapperConfig.absorb``) and the map NMS offered to every
+method (``MapperConfig.map_nms``): hand-made detections whose right map is known."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+from icmapper.data.sources import open_source
+from icmapper.data.types import RANGE_60x30, Frame, Sequence
+from icmapper.mapping.config import MapperConfig
+from icmapper.mapping.map_nms import map_nms
+from icmapper.mapping.mapper import Mapper
+from icmapper.mapping.methods import method
+from icmapper.mapping.run import map_sequence
+from icmapper.mapping.types import Detections
+
+
+def line(x0: float, x1: float, y: float, n: int = 20) -> np.ndarray:
+    return np.stack([np.linspace(x0, x1, n), np.full(n, y)], -1).astype(np.float32)
+
+
+class Scripted:
+    """Fixed ego-frame detections per frame index (the same for every pose)."""
+
+    def __init__(self, frames: dict[int, list[tuple[int, np.ndarray]]]) -> None:
+        self.frames = frames
+
+    def reset(self) -> None:
+        pass
+
+    def detect(self, frame: Frame) -> Detections:
+        items = self.frames.get(frame.index, [])
+        if not items:
+            return Detections.empty()
+        return Detections(
+            classes=np.array([c for c, _ in items], np.int64),
+            scores=np.full(len(items), 0.9, np.float32),
+            points=np.stack([p for _, p in items]).astype(np.float32),
+        )
+
+
+@pytest.fixture(scope="module")
+def still() -> Sequence:
+    """A drive whose first frames serve as poses (the detections are scripted)."""
+    return open_source("sim:val:1", image_size=(32, 88), render=False)[0]
+
+
+#: Frame 0: a long divider. Frame 1: the divider and a piece of it 0.3 m off, 12 m long, which
+#: the tracker takes for another instance (one-to-one) and re-identification may not rename.
+SCRIPT = {
+    0: [(1, line(-25, 25, 2.0))],
+    1: [(1, line(-25, 25, 2.0)), (1, line(-5, 7, 2.3))],
+    2: [(1, line(-25, 25, 2.0)), (1, line(-5, 7, 2.3))],
+}
+
+
+def _run(still: Sequence, cfg: MapperConfig) -> Mapper:
+    m = Mapper(Scripted(SCRIPT), config=cfg)
+    m.reset()
+    for i in range(3):
+        m.step(still.frame(i, with_images=False))
+    return m
+
+
+def test_a_piece_on_an_instance_is_absorbed_and_its_track_maps_into_it(still: Sequence) -> None:
+    # re-identification off, one hit enough: the piece enters the map as its own instance
+    base = MapperConfig(reid_distance=0.0, min_hits=1)
+    apart = _run(still, replace(base, absorb=False))
+    assert len(apart.global_map) == 2
+    joined = _run(still, base)
+    assert len(joined.global_map) == 1
+    assert joined.stats.absorbed == 1
+    (kept,) = [int(i) for i in joined.global_map.ids()]
+    # the piece's track maps into the kept instance, which took its observation (frames 1, 2)
+    piece_track = max(int(t.id) for t in joined.tracker.tracks)
+    assert joined.alias == {piece_track: kept}
+    assert joined.global_map.info(kept)["observations"] == 5
+    # the kept divider is the long one as the map without absorption has it (the piece adds
+    # nothing beyond it), moved by at most the piece's 0.3 m offset
+    _, pts = joined.global_map.get(kept)
+    long_id = min(int(i) for i in apart.global_map.ids())
+    _, ref = apart.global_map.get(long_id)
+    d = np.linalg.norm(pts[:, None] - ref[None], axis=-1).min(1)  # (n,) to the nearest vertex
+    assert d.max() <= 0.3 + 0.5  # + half the 1 m spacing of the stored vertices
+    assert len(pts) >= len(ref) - 1
+
+
+def test_absorption_survives_save_and_resume(still: Sequence, tmp_path: Path) -> None:
+    cfg = MapperConfig(reid_distance=0.0, min_hits=1)
+    m = Mapper(Scripted(SCRIPT), config=cfg)
+    m.reset()
+    for i in range(2):
+        m.step(still.frame(i, with_images=False))
+    path = tmp_path / "run.icmap"
+    m.global_map.save(str(path))
+    m.save_state(path)
+    resumed = Mapper(Scripted(SCRIPT), config=cfg)
+    resumed.resume(path)
+    assert resumed.stats.absorbed == m.stats.absorbed == 1
+    assert resumed.alias == m.alias
+    m.step(still.frame(2, with_images=False))
+    resumed.step(still.frame(2, with_images=False))
+    assert len(resumed.global_map) == len(m.global_map) == 1
+
+
+def test_map_nms_cleans_any_method_and_only_when_asked(still: Sequence) -> None:
+    cfg = MapperConfig(baseline_threshold=0.3, map_nms=False)
+    counts = {}
+    for nms in (False, True):
+        post = method("post-track").build(Scripted(SCRIPT), replace(cfg, map_nms=nms), RANGE_60x30)
+        frames, gmap = map_sequence(post, _three(still), with_images=False)
+        counts[nms] = len(gmap)
+        assert len(frames) == 3  # per-frame output is the same either way
+    assert counts == {False: 2, True: 1}
+
+
+def test_map_nms_on_a_hand_made_map() -> None:
+    from icmapper import GlobalMap
+
+    gm = GlobalMap()
+    long_ = gm.insert(2, line(0, 60, 0).astype(np.float64))
+    gm.insert(2, line(10, 30, 0.4).astype(np.float64))  # a copy of a stretch of the kerb
+    lane = gm.insert(2, line(0, 60, 3.5).astype(np.float64))  # the next kerb: stays
+    assert map_nms(gm, MapperConfig()) == 1
+    assert sorted(int(i) for i in gm.ids()) == [long_, lane]
+    assert map_nms(gm, MapperConfig()) == 0  # nothing left to absorb
+
+
+def _three(seq: Sequence) -> Sequence:
+    """The first three frames of ``seq``."""
+    return replace(seq, timestamps=seq.timestamps[:3], poses=seq.poses[:3])
