@@ -6,8 +6,10 @@ the engine, the tracker or the mapper.
 ``python -m benchmarks longrun [--frames 10000] [--every 500] [--city 10000]``
 
 Prints frames, map instances, stored map points and resident memory (MB, /proc/self/statm) at
-every sample, then the growth of memory over the second half of the run (when the map has stopped
-growing) in MB and per 1,000 frames.
+every sample, then the trend of memory over the second half of the run (when the map has nearly
+stopped growing): the least-squares slope of RSS against frames over every sample of that half,
+in MB per 1,000 frames with its standard error, beside the map's growth in stored points — not
+the difference of two end points, which the allocator's swings (several MB either way) decide.
 """
 
 from __future__ import annotations
@@ -54,12 +56,26 @@ def main(argv: list[str] | None = None) -> int:
     for f, n, p, r, s in rows:
         print(f"{f:7d} {n:9d} {p:8d} {r:8.1f} {s:8.1f}")
     half = [r for r in rows if r[0] >= len(seq) // 2]
-    grow = half[-1][3] - half[0][3]
-    frames = half[-1][0] - half[0][0]
-    inst = half[-1][1] - half[0][1]
+    slope, err = rss_slope([r[0] for r in half], [r[3] for r in half])
     print(
-        f"second half: RSS {half[0][3]:.1f} -> {half[-1][3]:.1f} MB ({grow:+.1f} MB, "
-        f"{1000 * grow / max(frames, 1):+.2f} MB per 1,000 frames); map {inst:+d} instances; "
+        f"second half (frames {half[0][0]}-{half[-1][0]}, {len(half)} samples): RSS slope "
+        f"{1000 * slope:+.2f} +- {1000 * err:.2f} MB per 1,000 frames (least squares; RSS "
+        f"{min(r[3] for r in half):.1f}-{max(r[3] for r in half):.1f} MB); map "
+        f"{half[-1][1] - half[0][1]:+d} instances, {half[-1][2] - half[0][2]:+d} stored points; "
         f"{1e3 * rows[-1][4] / len(seq):.1f} ms per frame"
     )
-    return 0 if np.isfinite(grow) else 1
+    return 0 if np.isfinite(slope) else 1
+
+
+def rss_slope(frames: list[int], rss: list[float]) -> tuple[float, float]:
+    """Least-squares slope of ``rss`` (MB) against ``frames`` in MB per frame, and its standard
+    error (nan with fewer than 3 samples)."""
+    x, y = np.asarray(frames, np.float64), np.asarray(rss, np.float64)  # (n,), (n,)
+    if len(x) < 2:
+        return float("nan"), float("nan")
+    slope, intercept = np.polyfit(x, y, 1)
+    if len(x) < 3:
+        return float(slope), float("nan")
+    resid = y - (slope * x + intercept)  # (n,)
+    err = np.sqrt(resid @ resid / (len(x) - 2) / np.sum((x - x.mean()) ** 2))
+    return float(slope), float(err)

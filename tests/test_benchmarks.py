@@ -5,6 +5,7 @@ with an error that says where the benchmarks are."""
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 
 from benchmarks import __main__ as runner
@@ -35,7 +36,7 @@ def test_runner_dispatches_with_options(capsys: pytest.CaptureFixture[str]) -> N
 def test_runner_lists_every_benchmark(capsys: pytest.CaptureFixture[str]) -> None:
     assert runner.main([]) == 2
     out = capsys.readouterr().out
-    for name in ("geometry", "render", "eval", "networks", "mapper"):
+    for name in ("geometry", "render", "eval", "networks", "mapper", "viewer"):
         assert name in out
     with pytest.raises(SystemExit):
         runner.main(["no-such-benchmark"])
@@ -49,7 +50,52 @@ def test_city_instances_is_seeded() -> None:
     assert all(ca == cb and (pa == pb).all() for (ca, pa), (cb, pb) in zip(a, b, strict=True))
 
 
-@pytest.mark.parametrize("name", ["geometry", "render", "eval", "networks", "mapper"])
+def test_reference_merges_as_the_engine_does() -> None:
+    """Like with like: after the same detections the shapely/scipy reference's polylines lie on
+    the engine's (local refit, splice; a whole-instance refit would move their far parts too)
+    and its crossings cover the same area."""
+    import shapely
+
+    instances = bench.city_instances(300, seed=5)
+    poses = bench.random_poses(instances, 12, seed=6)
+    gm = bench._engine_map(instances)
+    rng = np.random.default_rng(7)
+    dets = [bench.detections_for(gm, pose, rng) for pose in poses]
+    ref = bench.ShapelyMap({int(i): gm.get(int(i)) for i in gm.ids()})
+    for det in dets:
+        for i, d in det:
+            gm.merge(i, d, frame=1)
+            ref.merge(i, d)
+    lines, crossings = [], []
+    for i in sorted({i for det in dets for i, _ in det}):
+        cls, pts = gm.get(i)
+        theirs = ref.geom[ref.slot[i]]
+        if cls == bench.CLASS_CROSSING:
+            ours = shapely.Polygon(pts)
+            crossings.append(ours.intersection(theirs).area / ours.union(theirs).area)
+        else:
+            lines.append(shapely.hausdorff_distance(shapely.LineString(pts), theirs))
+    assert len(lines) > 40 and len(crossings) > 10
+    # polylines: the same curve (scipy's splprep is the engine's fit's oracle) to 1 mm
+    assert max(lines) < 1e-3, max(lines)
+    # crossings: the same union, resampled from another start point (corners cut differently)
+    assert min(crossings) > 0.95, min(crossings)
+
+
+def test_longrun_memory_trend_is_a_least_squares_slope() -> None:
+    """The long run's memory verdict: a slope over all the second half's samples (a rise then a
+    drop back at the last sample is a trend the two end points would hide)."""
+    from benchmarks.longrun import rss_slope
+
+    frames = [5001, 5501, 6001, 6501, 7001]
+    slope, err = rss_slope(frames, [100.0 + 0.002 * (f - 5001) for f in frames])
+    assert slope == pytest.approx(0.002) and err == pytest.approx(0.0, abs=1e-12)
+    rss = [136.9, 140.0, 142.9, 147.7, 135.9]  # the two ends agree within 1 MB, the middle rises
+    slope, err = rss_slope(frames, rss)
+    assert slope == pytest.approx(np.polyfit(frames, rss, 1)[0]) and err > 0
+
+
+@pytest.mark.parametrize("name", ["geometry", "render", "eval", "networks", "mapper", "viewer"])
 def test_every_benchmark_module_has_main(name: str) -> None:
     import importlib
 
