@@ -522,3 +522,62 @@ def test_every_geojson_has_one_schema(
     assert any(f["properties"]["drives"] for f in docs["city"]["features"])
     line = next(f for f in docs["local"]["features"] if f["properties"]["class"] == "divider")
     assert line["geometry"]["coordinates"] == m.get(line["id"])[1].tolist()  # as stored
+
+
+# ---------------------------------------------------------------- 15. viewing a city
+def test_view_of_a_city_folder(cities: dict[str, Path], tmp_path: Path) -> None:
+    import re
+
+    from icmapper.city.manifest import read_manifest
+
+    out = tmp_path / "city.html"
+    assert main(["view", str(cities["merge"]), "--out", str(out)]) == 0
+    html = out.read_text()
+    m = re.search(r'<script type="application/json" id="icmapper-data">(.*?)</script>', html, re.S)
+    assert m is not None
+    data = json.loads(m.group(1).replace("<\\/", "</"))
+    manifest = read_manifest(cities["merge"])
+    assert data["kind"] == "city" and data["gt"] is not None and data["metrics"] is not None
+    assert [d["name"] for d in data["drives"]] == [d.sequence for d in manifest.ok_drives()]
+    for d in data["drives"]:
+        assert d["frames"]["count"] == len(d["frames"]["pose"]) > 0
+        assert len(d["dets"]["frameStart"]) == d["frames"]["count"] + 1
+    assert '<select id="drive"' in html
+    _city_page_in_a_browser(out, data)
+
+
+def _city_page_in_a_browser(path: Path, data: dict) -> None:
+    """The drive selector moves the slider through the chosen drive's frames; the city map and
+    the city's ground truth stay whole. Skipped without Playwright and Chromium."""
+    try:
+        from playwright.sync_api import sync_playwright
+
+        from benchmarks.viewer import find_chromium
+    except ImportError as exc:
+        pytest.skip(f"no browser test ({exc})")
+    exe = find_chromium()
+    if not exe or os.environ.get("ICMAPPER_SKIP_BROWSER", "").strip() == "1":
+        pytest.skip("no chromium for the browser check")
+    n_map = len(data["map"]["id"])
+    with sync_playwright() as p:
+        browser = p.chromium.launch(executable_path=exe, args=["--no-sandbox"])
+        try:
+            page = browser.new_page(viewport={"width": 1280, "height": 820})
+            errors: list[str] = []
+            page.on("pageerror", lambda e: errors.append(str(e)))
+            page.goto(path.as_uri())
+            page.wait_for_function("window.icmapperViewer && window.icmapperViewer.ready")
+            last = len(data["drives"]) - 1
+            for k in (0, last):
+                page.select_option("#drive", str(k))
+                page.locator("#frame").fill("0")
+                s = page.evaluate("icmapperViewer")
+                assert s["drive"] == k and s["frame"] == 0
+                assert s["numFrames"] == data["drives"][k]["frames"]["count"]
+                assert sum(s["drawn"].values()) == n_map  # the whole city map at frame 0
+                assert sum(s["drawnGt"].values()) == len(data["gt"]["cls"])
+                d = data["drives"][k]["dets"]
+                assert sum(s["drawnDetections"].values()) == d["frameStart"][1] - d["frameStart"][0]
+            assert not errors, errors
+        finally:
+            browser.close()

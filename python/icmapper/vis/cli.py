@@ -72,9 +72,10 @@ def cmd_vis(args: argparse.Namespace) -> int:
 
 
 def cmd_view(args: argparse.Namespace) -> int:
+    from icmapper.city.manifest import is_city_run
     from icmapper.cliargs import output_file
     from icmapper.vis.replay import load_map_items, open_replay
-    from icmapper.vis.viewer import map_viewer_data, viewer_data, write_viewer
+    from icmapper.vis.viewer import city_viewer_data, map_viewer_data, viewer_data, write_viewer
 
     if args.out:
         output_file(args.out, "--out")
@@ -82,6 +83,9 @@ def cmd_view(args: argparse.Namespace) -> int:
     if path.is_file() and path.suffix == ".icmap":
         data = map_viewer_data(load_map_items(path), f"map {path.name}")
         out = Path(args.out) if args.out else path.with_suffix(".html")
+    elif path.is_dir() and is_city_run(path):  # the city map, its drives, the city's GT
+        data = city_viewer_data(path, with_source=not args.no_source)
+        out = Path(args.out) if args.out else path / "view-city.html"
     elif path.is_dir() and (path / "run.json").is_file():
         replay = open_replay(
             path,
@@ -93,9 +97,11 @@ def cmd_view(args: argparse.Namespace) -> int:
         data = viewer_data(replay, thumbnails=not args.no_thumbnails)
         out = Path(args.out) if args.out else path / f"view-{replay.name}.html"
     elif path.is_dir():
-        raise ValueError(f"{path} is not a run folder (no run.json in it)")
+        raise ValueError(
+            f"{path} is not a run folder (no run.json in it) nor a city run (no city.json)"
+        )
     else:
-        raise ValueError(f"{path}: expected a run folder or a .icmap map file")
+        raise ValueError(f"{path}: expected a run folder or a .icmap map file (or a city folder)")
     write_viewer(data, out)
     size = out.stat().st_size / 1e6
     print(f"wrote {out} ({len(data['map']['id'])} map instances, {size:.1f} MB, works offline)")
@@ -147,14 +153,21 @@ def register(subparsers: Any) -> None:
         description="Writes one HTML file (data and code inline, no network) to scrub through a "
         "run: pan and zoom the global map, toggle classes, ground truth and predictions, move the "
         "time slider, click an instance for its id, class, observations, first/last frame and "
-        "Chamfer distance to the nearest ground truth; per-class CD and GAP. A .icmap file alone "
-        "gives the map with its bookkeeping frames.",
+        "Chamfer distance to the nearest ground truth; per-class CD and GAP. A city run folder "
+        "(icmapper map --city) gives the city map with the city's ground truth and a drive "
+        "selector (each drive's frames and predictions). A .icmap file alone gives the map with "
+        "its bookkeeping frames.",
     )
-    v.add_argument("path", metavar="RUN_DIR|MAP.icmap", help="a run folder or a native map file")
+    v.add_argument(
+        "path",
+        metavar="RUN_DIR|CITY_DIR|MAP.icmap",
+        help="a run folder, a city run folder or a native map file",
+    )
     v.add_argument("--sequence", help="sequence name or position in the run (default: first)")
     v.add_argument(
         "--out",
-        help="HTML path, in an existing folder (default RUN_DIR/view-SEQUENCE.html, MAP.html)",
+        help="HTML path, in an existing folder (default RUN_DIR/view-SEQUENCE.html, "
+        "CITY_DIR/view-city.html, MAP.html)",
     )
     v.add_argument("--no-thumbnails", action="store_true", help="leave out the camera images")
     v.add_argument(

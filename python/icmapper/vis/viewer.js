@@ -4,11 +4,16 @@
  * icmapper.vis.viewer). World coordinates in metres; the canvas shows them north up.
  *
  * The map at a frame is the final map's instances whose first frame (bookkeeping) is at or
- * before that frame's source index, drawn with their final shapes (icmapper.vis.replay).
+ * before that frame's source index, drawn with their final shapes (icmapper.vis.replay). A city
+ * (kind "city") holds its drives in D.drives ({name, index, frames, dets} each): a drive selector
+ * picks the drive whose frames the slider moves through; the city map and the city's ground truth
+ * are drawn whole at every frame (bookkeeping frames do not compare across drives).
  *
  * window.icmapperViewer (for tests and scripts):
  *   ready            true once the first frame is drawn
- *   numFrames        frames of the run (the slider's max + 1)
+ *   numFrames        frames of the run (the slider's max + 1); of the drive in a city
+ *   drive            the selected drive's position in D.drives (city), else null
+ *   setDrive(k)      selects drive k of a city (its frames, predictions and path) and draws
  *   frame            the current frame (slider position, 0-based)
  *   frameIndex       its index in the source sequence
  *   drawn            {class name: map instances drawn} (layer and class toggles, frame applied)
@@ -41,10 +46,15 @@
     throw new Error("icmapper viewer: unknown data format " + D.format + " v" + D.version);
   }
   const NC = D.classes.length;
-  const T = Math.max(1, D.frames.count);
+  const CITY = D.kind === "city" && D.drives && D.drives.length > 0;
+  if (CITY) { D.frames = D.drives[0].frames; D.dets = D.drives[0].dets; }
+  let T = Math.max(1, D.frames.count);
   const M = D.map;
   const NM = M.id.length;
-  const frameIndex = D.frames.index && D.frames.index.length ? D.frames.index : [0];
+  let frameIndex = D.frames.index && D.frames.index.length ? D.frames.index : [0];
+  // The bookkeeping frame up to which map instances are drawn at slider position t: a city's
+  // map is drawn whole (its instances' frames belong to different drives).
+  function mapLimit(t) { return CITY ? Infinity : frameIndex[t]; }
   // Levels of detail: vertex spacing (m) of simplified paths, built on first use. A draw uses the
   // coarsest level whose spacing stays under LOD_PX pixels: a chord of c pixels on a curve of
   // radius R metres at s pixels per metre strays c^2 / (8 R s) pixels, under 0.5 px for R >= 10 m.
@@ -112,13 +122,17 @@
     }
   }
 
-  const poses = D.frames.pose; // [[x, y, yaw]] or null
+  let poses = D.frames.pose; // [[x, y, yaw]] or null
   let pathAll = null;
-  if (poses && poses.length > 1) {
-    pathAll = new Path2D();
-    pathAll.moveTo(poses[0][0], poses[0][1]);
-    for (let t = 1; t < poses.length; t++) pathAll.lineTo(poses[t][0], poses[t][1]);
+  function buildPath() {
+    pathAll = null;
+    if (poses && poses.length > 1) {
+      pathAll = new Path2D();
+      pathAll.moveTo(poses[0][0], poses[0][1]);
+      for (let t = 1; t < poses.length; t++) pathAll.lineTo(poses[t][0], poses[t][1]);
+    }
   }
+  buildPath();
 
   // Spatial grid of instance bounding boxes for picking.
   const CELL = 25.0;
@@ -163,6 +177,7 @@
   };
   const api = {
     ready: false, numFrames: T, frame: state.frame, frameIndex: frameIndex[state.frame] || 0,
+    drive: CITY ? 0 : null,
     drawn: {}, drawnGt: {}, drawnDetections: {}, selected: null, lastDrawMs: 0, drawTimes: [],
   };
   window.icmapperViewer = api;
@@ -175,9 +190,12 @@
   slider.max = String(T - 1);
   slider.value = String(state.frame);
   $("title").textContent = D.title || "icmapper viewer";
-  $("subtitle").textContent = [D.source && "source " + D.source,
-    NM + " map instances", D.kind === "map" ? "map file (no run)" : T + " frames"]
-    .filter(Boolean).join(" · ");
+  function showSubtitle() {
+    $("subtitle").textContent = [D.source && "source " + D.source, NM + " map instances",
+      D.kind === "map" ? "map file (no run)" : CITY ? D.drives.length + " drives" : T + " frames"]
+      .filter(Boolean).join(" · ");
+  }
+  showSubtitle();
 
   function cssSize() { return [canvas.clientWidth || 1, canvas.clientHeight || 1]; }
 
@@ -276,7 +294,7 @@
   }
 
   function visibleInstance(i) {
-    return state.layers.map && state.classOn[M.cls[i]] && M.first[i] <= frameIndex[state.frame];
+    return state.layers.map && state.classOn[M.cls[i]] && M.first[i] <= mapLimit(state.frame);
   }
 
   function draw() {
@@ -297,6 +315,7 @@
     ctx.lineCap = "round";
     const px = 1 / v.scale; // one CSS pixel in metres
     const fIdx = frameIndex[state.frame];
+    const limit = mapLimit(state.frame);
     const drawn = {}, drawnGt = {}, drawnDet = {};
 
     if (state.layers.gt && D.gt) {
@@ -327,14 +346,14 @@
     ctx.lineWidth = 1.5 * px;
     const [vx0, vy1] = toWorld(0, 0), [vx1, vy0] = toWorld(w, h);
     const culled = (vx1 - vx0) * (vy1 - vy0) < CULL_BELOW * mapArea;
-    const inView = culled ? viewPaths(vx0, vy0, vx1, vy1, fIdx, level) : null;
+    const inView = culled ? viewPaths(vx0, vy0, vx1, vy1, limit, level) : null;
     let nInView = 0;
     for (let c = 0; c < NC; c++) {
       let n = 0;
       if (state.layers.map && state.classOn[c]) {
         ctx.strokeStyle = D.colours[c];
         for (const b of buckets[c]) {
-          if (b.first > fIdx) break;
+          if (b.first > limit) break;
           if (!culled) ctx.stroke(bucketPath(b, level));
           n += b.members.length;
         }
@@ -536,9 +555,11 @@
     if (D.cameras) D.cameras.frames[t].forEach((src, k) => { camImgs[k].src = src; });
     const fIdx = frameIndex[t];
     let nMap = 0;
-    for (let i = 0; i < NM; i++) if (M.first[i] <= fIdx) nMap++;
-    let info = "<dl><dt>frame</dt><dd>" + t + " / " + (T - 1) + " (source index " + fIdx + ")</dd>";
-    info += "<dt>map so far</dt><dd>" + nMap + " instances</dd>";
+    for (let i = 0; i < NM; i++) if (M.first[i] <= mapLimit(t)) nMap++;
+    let info = "<dl>";
+    if (CITY) info += "<dt>drive</dt><dd>" + D.drives[api.drive].name + "</dd>";
+    info += "<dt>frame</dt><dd>" + t + " / " + (T - 1) + " (source index " + fIdx + ")</dd>";
+    info += "<dt>" + (CITY ? "city map" : "map so far") + "</dt><dd>" + nMap + " instances</dd>";
     if (D.dets) {
       const n = D.dets.frameStart[t + 1] - D.dets.frameStart[t];
       let tracked = 0;
@@ -547,8 +568,9 @@
       }
       info += "<dt>predictions</dt><dd>" + n + " (" + tracked + " tracked)</dd>";
     }
-    info += "</dl><div class=\"muted\">map so far: instances first seen by this frame, " +
-      "final shapes</div>";
+    info += "</dl><div class=\"muted\">" + (CITY ? "the city map of every drive, " +
+      "the city's ground truth; the drive's frames and predictions"
+      : "map so far: instances first seen by this frame, final shapes") + "</div>";
     $("frameinfo").innerHTML = info;
     if (state.layers.follow && poses) {
       const p = poseAt(t);
@@ -580,6 +602,26 @@
     state.view.cy = (y0 + y1) / 2;
     state.view.scale = 0.92 * Math.min(w / Math.max(x1 - x0, 1), h / Math.max(y1 - y0, 1));
     draw();
+  };
+  api.setDrive = function (k) {
+    if (!CITY) throw new Error("icmapperViewer.setDrive: not a city");
+    k = Math.max(0, Math.min(D.drives.length - 1, Math.round(Number(k))));
+    const d = D.drives[k];
+    D.frames = d.frames;
+    D.dets = d.dets;
+    T = Math.max(1, d.frames.count);
+    frameIndex = d.frames.index && d.frames.index.length ? d.frames.index : [0];
+    poses = d.frames.pose;
+    buildPath();
+    detCache = { frame: -1, paths: null, counts: null };
+    api.drive = k;
+    api.numFrames = T;
+    slider.max = String(T - 1);
+    $("drive").value = String(k);
+    state.frame = T - 1;
+    showFrame();
+    draw();
+    return k;
   };
   api.setFrame = function (t) {
     state.frame = Math.max(0, Math.min(T - 1, Math.round(Number(t))));
@@ -747,13 +789,28 @@
   });
   document.addEventListener("keydown", (ev) => {
     if (ev.target && ev.target.tagName === "INPUT" && ev.target.type !== "checkbox") return;
+    if (ev.target && ev.target.tagName === "SELECT") return;
     if (ev.key === "ArrowRight") api.setFrame(state.frame + 1);
     else if (ev.key === "ArrowLeft") api.setFrame(state.frame - 1);
     else if (ev.key === "f") api.fit();
   });
   new ResizeObserver(() => requestDraw()).observe(canvas);
 
+  function buildDrives() {
+    const sel = $("drive");
+    if (!CITY) return;
+    D.drives.forEach((d, k) => {
+      const opt = document.createElement("option");
+      opt.value = String(k);
+      opt.textContent = "drive " + d.index + ": " + d.name + " (" + d.frames.count + " frames)";
+      sel.appendChild(opt);
+    });
+    sel.hidden = false;
+    sel.addEventListener("change", () => api.setDrive(sel.value));
+  }
+
   // ------------------------------------------------------------------ start
+  buildDrives();
   buildLayers();
   buildMetrics();
   buildCameras();

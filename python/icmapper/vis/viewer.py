@@ -31,8 +31,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from icmapper.atomic import write_text_atomic
-from icmapper.data.types import CLASS_NAMES, ego_to_world, pose_to_xy_yaw
-from icmapper.vis.replay import MapItem, RunReplay
+from icmapper.data.types import CLASS_NAMES, PerceptionRange, ego_to_world, pose_to_xy_yaw
+from icmapper.eval.runfmt import RunSequence
+from icmapper.vis.replay import MapItem, RunReplay, load_map_items
 from icmapper.vis.style import CLASS_HEX
 
 FORMAT_NAME = "icmapper-viewer"
@@ -170,15 +171,19 @@ def _thumbs(replay: RunReplay, quality: int = 70) -> dict[str, Any] | None:
     }
 
 
-def viewer_data(replay: RunReplay, thumbnails: bool = True) -> dict[str, Any]:
-    """Everything the page shows for one sequence of a run (module docstring)."""
-    seq = replay.seq
-    items = replay.map_items
-    gt_items = None
-    if replay.source is not None:
-        gt_items = [(int(g.cls), np.asarray(g.points), bool(g.closed)) for g in replay.global_gt]
-    cd, gt_index = nearest_gt_chamfer(items, gt_items or [])
+def _frames_block(seq: RunSequence) -> dict[str, Any]:
+    """A run sequence's frames: count, source indices, seconds from its start, (x, y, yaw)."""
     t0 = float(seq.timestamps[0]) if len(seq) else 0.0
+    return {
+        "count": len(seq),
+        "index": seq.frame_index.tolist(),
+        "time": [round(float(x) - t0, 3) for x in seq.timestamps],
+        "pose": [[round(v, 3) for v in pose_to_xy_yaw(p)] for p in seq.poses],
+    }
+
+
+def _dets_block(seq: RunSequence) -> dict[str, Any]:
+    """A run sequence's predictions in world coordinates, frame by frame (``frameStart``)."""
     dets_cls, dets_tid, dets_score, dets_pts, frame_start = [], [], [], [], [0]
     for t in range(len(seq)):
         f = seq.frame(t)
@@ -191,6 +196,25 @@ def viewer_data(replay: RunReplay, thumbnails: bool = True) -> dict[str, Any]:
             dets_pts.append(ego_to_world(pts, f.pose))
         frame_start.append(len(dets_cls))
     d_start, d_xy = _flat(dets_pts)
+    return {
+        "frameStart": frame_start,
+        "cls": dets_cls,
+        "tid": dets_tid,
+        "score": dets_score,
+        "untrackedFrom": 1 << 40,
+        "start": d_start,
+        "xy": d_xy,
+    }
+
+
+def viewer_data(replay: RunReplay, thumbnails: bool = True) -> dict[str, Any]:
+    """Everything the page shows for one sequence of a run (module docstring)."""
+    seq = replay.seq
+    items = replay.map_items
+    gt_items = None
+    if replay.source is not None:
+        gt_items = [(int(g.cls), np.asarray(g.points), bool(g.closed)) for g in replay.global_gt]
+    cd, gt_index = nearest_gt_chamfer(items, gt_items or [])
     data: dict[str, Any] = {
         "format": FORMAT_NAME,
         "version": FORMAT_VERSION,
@@ -202,27 +226,66 @@ def viewer_data(replay: RunReplay, thumbnails: bool = True) -> dict[str, Any]:
         "classes": list(CLASS_NAMES),
         "colours": list(CLASS_HEX),
         "range": [replay.rng.half_x, replay.rng.half_y],
-        "frames": {
-            "count": len(seq),
-            "index": seq.frame_index.tolist(),
-            "time": [round(float(x) - t0, 3) for x in seq.timestamps],
-            "pose": [[round(v, 3) for v in pose_to_xy_yaw(p)] for p in seq.poses],
-        },
+        "frames": _frames_block(seq),
         "map": _map_block(items, cd, gt_index),
         "gt": _gt_block(gt_items) if gt_items is not None else None,
-        "dets": {
-            "frameStart": frame_start,
-            "cls": dets_cls,
-            "tid": dets_tid,
-            "score": dets_score,
-            "untrackedFrom": 1 << 40,
-            "start": d_start,
-            "xy": d_xy,
-        },
+        "dets": _dets_block(seq),
         "metrics": _metrics(items, gt_items, replay.run.range_name) if gt_items else None,
         "cameras": _thumbs(replay) if thumbnails else None,
     }
     return data
+
+
+def city_viewer_data(city: str | os.PathLike, with_source: bool = True) -> dict[str, Any]:
+    """Everything the page shows for a city run folder (kind "city"): the city map (with each
+    instance's distance to the nearest ground truth), the city's cross-drive ground truth and
+    its CD / GAP (``with_source``: recomputed from the drives' sources), and per successful
+    drive (``drives``: name, drive index, frames, predictions) what a run's page shows of its
+    one sequence; the page's drive selector picks one. No camera thumbnails."""
+    from icmapper.city.manifest import CITY_MAP, read_manifest
+    from icmapper.eval.runfmt import read_run
+
+    city = Path(city)
+    manifest = read_manifest(city)
+    ok = manifest.ok_drives()
+    if not ok or not (city / CITY_MAP).is_file():
+        raise ValueError(f"{city}: a city run without a city map (no drive succeeded)")
+    rng = PerceptionRange.from_name(manifest.range_name)
+    items = load_map_items(city / CITY_MAP)
+    gt_items = None
+    if with_source:
+        from icmapper.city.run import city_sequences
+        from icmapper.data.gt import city_gt
+
+        gt = city_gt(city_sequences(manifest), rng)
+        gt_items = [(int(g.cls), np.asarray(g.points), bool(g.closed)) for g in gt]
+    cd, gt_index = nearest_gt_chamfer(items, gt_items or [])
+    drives = []
+    for d in ok:
+        seq = read_run(city / d.run).sequences[0]
+        drives.append(
+            {"name": seq.name, "index": d.index, "frames": _frames_block(seq),
+             "dets": _dets_block(seq)}
+        )  # fmt: skip
+    return {
+        "format": FORMAT_NAME,
+        "version": FORMAT_VERSION,
+        "kind": "city",
+        "title": f"city map of {len(ok)} drives ({manifest.method}, {manifest.mode})",
+        "method": manifest.method,
+        "source": ", ".join(dict.fromkeys(d.spec for d in ok)),
+        "sequence": "",
+        "classes": list(CLASS_NAMES),
+        "colours": list(CLASS_HEX),
+        "range": [rng.half_x, rng.half_y],
+        "frames": None,  # the selected drive's (``drives``)
+        "map": _map_block(items, cd, gt_index),
+        "gt": _gt_block(gt_items) if gt_items is not None else None,
+        "dets": None,
+        "drives": drives,
+        "metrics": _metrics(items, gt_items, manifest.range_name) if gt_items else None,
+        "cameras": None,
+    }
 
 
 def map_viewer_data(items: list[MapItem], title: str) -> dict[str, Any]:
