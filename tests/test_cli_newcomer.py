@@ -341,13 +341,14 @@ def test_no_source_picture_has_no_ground_truth_legend(run_dir: Path) -> None:
 
     band = tint(CLASS_RGB[1], 0.7)  # the legend's ground-truth swatch
 
-    def header_has_band(with_source: bool) -> bool:
+    def legend(with_source: bool) -> list[bool]:
+        """Which swatches (the three classes, the ground truth) the header shows."""
         replay = open_replay(run_dir, image_size=(96, 264), with_source=with_source)
-        pic = np.asarray(frame_picture(replay, 0))[:24]  # (24, W, 3) the header strip
-        return bool(np.all(pic == band, axis=2).sum() > 30)
+        pic = np.asarray(frame_picture(replay, 0))[:42]  # header and panel titles only
+        return [bool(np.all(pic == rgb, axis=2).sum() >= 36) for rgb in (*CLASS_RGB, band)]
 
-    assert header_has_band(True)
-    assert not header_has_band(False)
+    assert legend(True) == [True, True, True, True]
+    assert legend(False) == [True, True, True, False]  # whole, though the picture is narrow
 
 
 def test_preview_labels_inside_the_picture() -> None:

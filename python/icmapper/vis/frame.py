@@ -230,16 +230,27 @@ def overview_panel(
     return out
 
 
-def _legend(d: ImageDraw.ImageDraw, x: int, y: int, ground_truth: bool) -> None:
-    """The class colours, and the ground truth's pale band where the picture draws it."""
-    f = font(12)
-    for cls, name in enumerate(CLASS_NAMES):
-        d.line((x, y + 8, x + 18, y + 8), fill=CLASS_RGB[cls], width=3)
-        d.text((x + 22, y), name, fill=TEXT_RGB, font=f)
-        x += 30 + int(d.textlength(name, font=f))
+def _legend_entries(ground_truth: bool) -> list[tuple[str, tuple[int, int, int], int]]:
+    """(text, swatch colour, swatch width): the class colours, and the ground truth's pale band
+    where the picture draws it."""
+    out = [(name, CLASS_RGB[cls], 3) for cls, name in enumerate(CLASS_NAMES)]
     if ground_truth:
-        d.line((x, y + 8, x + 18, y + 8), fill=tint(CLASS_RGB[1], 0.7), width=6)
-        d.text((x + 22, y), "ground truth", fill=TEXT_RGB, font=f)
+        out.append(("ground truth", tint(CLASS_RGB[1], 0.7), 6))
+    return out
+
+
+def _legend_width(d: ImageDraw.ImageDraw, ground_truth: bool) -> int:
+    return sum(
+        30 + int(d.textlength(t, font=font(12))) for t, _, _ in _legend_entries(ground_truth)
+    )
+
+
+def _legend(d: ImageDraw.ImageDraw, x: int, y: int, ground_truth: bool) -> None:
+    f = font(12)
+    for text, rgb, w in _legend_entries(ground_truth):
+        d.line((x, y + 8, x + 18, y + 8), fill=rgb, width=w)
+        d.text((x + 22, y), text, fill=TEXT_RGB, font=f)
+        x += 30 + int(d.textlength(text, font=f))
 
 
 def frame_picture(
@@ -273,12 +284,6 @@ def frame_picture(
     ow = int(np.clip(height * span[0] / span[1], height * 0.6, height * 1.6))
     panels.append(overview_panel(replay, view, (ow, height), b))
     width = sum(p.width for p in panels) + _GAP * (len(panels) + 1)
-    pic = Image.new("RGB", (width, height + _HEADER + _GAP), BACKGROUND_RGB)
-    x = _GAP
-    for p in panels:
-        pic.paste(p, (x, _HEADER))
-        x += p.width + _GAP
-    d = ImageDraw.Draw(pic)
     p = view.predictions
     tracked = sum(is_tracked(i) for i in p.track_ids.tolist())
     head = (
@@ -286,9 +291,23 @@ def frame_picture(
         f"t = {view.timestamp - float(replay.seq.timestamps[0]):.1f} s   "
         f"{len(p)} predictions ({tracked} tracked)"
     )
+    gt = view.gt is not None
+    probe = ImageDraw.Draw(Image.new("RGB", (1, 1)))
+    head_end = _GAP + 2 + int(probe.textlength(head, font=font(14))) + 20
+    legend_w = _legend_width(probe, gt)
+    one_line = head_end + legend_w <= width - _GAP  # else the legend on a line of its own
+    header = _HEADER if one_line else 2 * _HEADER - 6
+    pic = Image.new("RGB", (width, height + header + _GAP), BACKGROUND_RGB)
+    x = _GAP
+    for panel in panels:
+        pic.paste(panel, (x, header))
+        x += panel.width + _GAP
+    d = ImageDraw.Draw(pic)
     d.text((_GAP + 2, 5), head, fill=TEXT_RGB, font=font(14))
-    x = max(width - 470, _GAP + 2 + int(d.textlength(head, font=font(14))) + 20)
-    _legend(d, x, 6, ground_truth=view.gt is not None)
+    if one_line:
+        _legend(d, width - _GAP - legend_w, 6, gt)
+    else:
+        _legend(d, _GAP + 2, _HEADER - 2, gt)
     return pic
 
 
