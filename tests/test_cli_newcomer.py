@@ -587,3 +587,44 @@ def _city_page_in_a_browser(path: Path, data: dict) -> None:
             assert not errors, errors
         finally:
             browser.close()
+
+
+# ---------------------------------------------------------------- the house: import circles
+@pytest.mark.parametrize(
+    ("registry", "plugins", "entry"),
+    [
+        ("icmapper.formats.registry", "icmapper.formats.", "icmapper.formats.maptr"),
+        ("icmapper.mapping.methods", "icmapper.mapping.baselines", "icmapper.mapping.types"),
+    ],
+)
+def test_registries_do_not_import_their_plugins(registry: str, plugins: str, entry: str) -> None:
+    """A registry holds what registers in it and imports none of it (the plugins import the
+    registry: one edge, no circle); the package ``__init__`` imports the built-in plugins, so
+    importing any module of the package finds them registered."""
+    import ast
+    import importlib.util
+    import subprocess
+    import sys
+
+    spec = importlib.util.find_spec(registry)
+    assert spec is not None and spec.origin is not None
+    tree = ast.parse(Path(spec.origin).read_text())
+    imported = {
+        node.module if isinstance(node, ast.ImportFrom) else alias.name
+        for node in ast.walk(tree)
+        if isinstance(node, ast.Import | ast.ImportFrom)
+        for alias in node.names
+    }
+    own = {"icmapper.formats.registry", "icmapper.formats.types", "icmapper.mapping.methods"}
+    assert not {m for m in imported if m and m.startswith(plugins) and m not in own}, imported
+    code = (
+        f"import {entry}\n"
+        "from icmapper.formats.registry import formats\n"
+        "from icmapper.mapping.methods import methods\n"
+        "print(sorted(formats()), list(methods())[-4:])\n"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip() == (
+        "['icmapper', 'maptr', 'streammapnet'] ['post-track', 'vma', 'cluster-fit', 'polymerge']"
+    )

@@ -18,6 +18,11 @@ from icmapper.formats.registry import (
 )
 from icmapper.formats.types import PredictedFrame, PredictionFileError, PredictionSet
 
+# The built-in formats register themselves on import (the registry never imports them).
+import icmapper.formats.icmapper_json  # noqa: E402, F401  # isort: skip
+import icmapper.formats.maptr  # noqa: E402, F401  # isort: skip
+import icmapper.formats.streammapnet  # noqa: E402, F401  # isort: skip
+
 __all__ = [
     "PredictedFrame",
     "PredictionFileError",

@@ -4,6 +4,10 @@
 A format is one module with a ``read(path, options)`` (and, where icmapper can write it, a
 ``write``) plus one ``register_format`` call at its end; ``sniff(data)`` recognises a file's parsed
 JSON so that FORMAT can be left out. The command line's choices and help come from here.
+
+The registry never imports its formats (each format module imports the registry: one import
+edge); the package's ``__init__`` imports the built-in ones, so they are registered whenever
+anything of ``icmapper.formats`` is imported.
 """
 
 from __future__ import annotations
@@ -42,11 +46,7 @@ def register_format(fmt: PredictionFormat) -> PredictionFormat:
 
 
 def formats() -> dict[str, PredictionFormat]:
-    """Every registered format by name (the built-in modules register themselves on import)."""
-    import icmapper.formats.icmapper_json  # noqa: F401
-    import icmapper.formats.maptr  # noqa: F401
-    import icmapper.formats.streammapnet  # noqa: F401
-
+    """Every registered format by name (the built-in ones: ``icmapper.formats.__init__``)."""
     return dict(_FORMATS)
 
 

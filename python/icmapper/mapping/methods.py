@@ -8,7 +8,10 @@ Two kinds of method:
   ``MappingMethod`` reading its settings from the shared ``MapperConfig``. Every baseline is one.
 
 A new baseline is one module (the class, with ``name`` set to its registered name) plus one
-``register_method`` call at its end; the command line's choices and help come from here.
+``register_method`` call at its end, and one line in ``baselines/__init__.py``; the command line's
+choices and help come from here. The registry never imports the baselines (each imports the
+registry: one import edge); ``icmapper.mapping``'s ``__init__`` imports the ``baselines`` package,
+so they are registered whenever anything of ``icmapper.mapping`` is imported.
 """
 
 from __future__ import annotations
@@ -59,8 +62,6 @@ def register_method(info: MethodInfo) -> MethodInfo:
 
 def methods() -> dict[str, MethodInfo]:
     """Every registered method by name, in table order (the learned mapper's variants first)."""
-    import icmapper.mapping.baselines  # noqa: F401  (each baseline module registers itself)
-
     return dict(_METHODS)
 
 
