@@ -22,11 +22,10 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import ConvexHull, QhullError, cKDTree
 
-from icmapper.data.types import NUM_CLASSES, Frame, MapClass, PerceptionRange, RANGE_60x30
-from icmapper.mapping.baselines.common import new_global_map, read_frame
-from icmapper.mapping.config import MapperConfig
+from icmapper.data.types import NUM_CLASSES, Frame, MapClass
+from icmapper.mapping.baselines.common import Baseline, new_global_map
 from icmapper.mapping.methods import MethodInfo, register_method
-from icmapper.mapping.types import DetectionSource, StepResult
+from icmapper.mapping.types import StepResult
 
 if TYPE_CHECKING:
     from icmapper._icmap import GlobalMap
@@ -97,7 +96,7 @@ def order_along_axis(points: NDArray[np.floating], spacing: float) -> NDArray[np
     return np.stack([sx[ok] / cnt[ok], sy[ok] / cnt[ok]], axis=1)  # (b, 2)
 
 
-class ClusterFit:
+class ClusterFit(Baseline):
     """Cluster & Fit (offline; see the module docstring).
 
     source: detections; score_threshold: detections below are ignored; eps / min_samples: DBSCAN;
@@ -107,16 +106,8 @@ class ClusterFit:
 
     name = "cluster-fit"
 
-    def __init__(
-        self,
-        source: DetectionSource,
-        config: MapperConfig | None = None,
-        rng: PerceptionRange = RANGE_60x30,
-    ) -> None:
-        cfg = config or MapperConfig()
-        self.source = source
-        self.config = cfg
-        self.score_threshold = cfg.baseline_threshold
+    def setup(self) -> None:
+        cfg = self.config
         self.eps = cfg.cluster_eps
         self.min_samples = cfg.cluster_min_samples
         self.smoothing = cfg.smoothing
@@ -131,7 +122,7 @@ class ClusterFit:
 
     def step(self, frame: Frame) -> StepResult:
         """Collects the frame's detected points (world frame); builds nothing."""
-        inp = read_frame(self.source, frame, self.score_threshold)
+        inp = self.read(frame)
         for i in range(len(inp.dets)):
             cls = int(inp.dets.classes[i])
             pts = densify(inp.world[i], self.spacing, MapClass(cls).closed)  # (m, 2)

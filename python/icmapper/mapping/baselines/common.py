@@ -1,5 +1,8 @@
-"""What every baseline shares: reading one frame's detections from the source, checking them,
-applying the score threshold and taking them to the world frame; creating the global map.
+"""What every baseline shares: its construction from a detection source, the shared
+``MapperConfig`` and the perception range (``Baseline``; with the global map built frame by frame
+and the crossing rule, ``OnlineMapBaseline``); reading one frame's detections from the source,
+checking them, applying the score threshold and taking them to the world frame; creating the
+global map.
 
 Checks happen before anything is changed, so a bad frame (NaN points, bad pose) raises ValueError
 and leaves the method's map and state as they were.
@@ -13,12 +16,13 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numpy.typing import NDArray
 
-from icmapper.data.types import Frame, ego_to_world, pose_to_xy_yaw
+from icmapper.data.types import Frame, PerceptionRange, RANGE_60x30, ego_to_world, pose_to_xy_yaw
+from icmapper.mapping.config import MapperConfig
+from icmapper.mapping.crossings import CrossingMerger
 from icmapper.mapping.types import Detections, DetectionSource
 
 if TYPE_CHECKING:
     from icmapper._icmap import GlobalMap
-    from icmapper.mapping.config import MapperConfig
 
 
 def new_global_map(config: MapperConfig) -> GlobalMap:
@@ -56,3 +60,49 @@ def read_frame(source: DetectionSource, frame: Frame, score_threshold: float) ->
     k, n = dets.points.shape[:2]
     world = ego_to_world(dets.points.reshape(-1, 2), pose).reshape(k, n, 2)  # (k, n, 2)
     return FrameInput(dets, world, xyyaw)
+
+
+class Baseline:
+    """What every baseline is built from: ``source`` (where detections come from), ``config``
+    (the shared ``MapperConfig``, its defaults when None; each baseline reads its own settings
+    from it) and ``rng`` (the perception range). Detections below ``baseline_threshold`` are
+    ignored (``read``). A baseline sets up its own settings and state in ``setup`` (called last
+    by the constructor), not in a constructor of its own."""
+
+    name = ""
+
+    def __init__(
+        self,
+        source: DetectionSource,
+        config: MapperConfig | None = None,
+        rng: PerceptionRange = RANGE_60x30,
+    ) -> None:
+        self.source = source
+        self.config = config or MapperConfig()
+        self.score_threshold = self.config.baseline_threshold
+        self.range = rng
+        self.setup()
+
+    def setup(self) -> None:
+        """The baseline's own settings (read from ``self.config``) and state."""
+
+    def read(self, frame: Frame) -> FrameInput:
+        """The frame's checked detections above the score threshold (``read_frame``)."""
+        return read_frame(self.source, frame, self.score_threshold)
+
+
+class OnlineMapBaseline(Baseline):
+    """A baseline that builds its global map frame by frame (``map``, with the config's
+    smoothing and spacing) and merges crossings by the shared rule (``crossings``)."""
+
+    def setup(self) -> None:
+        self.map: GlobalMap = new_global_map(self.config)
+        self.crossings = CrossingMerger(self.config.crossing_merge, self.range)
+
+    def reset(self) -> None:
+        self.source.reset()
+        self.map = new_global_map(self.config)
+        self.crossings.reset()
+
+    def finish(self) -> GlobalMap:
+        return self.map

@@ -16,24 +16,17 @@ tracks; this is what it would report as identity).
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 import numpy as np
 
-from icmapper.data.types import Frame, MapClass, PerceptionRange, RANGE_60x30
-from icmapper.mapping.baselines.common import new_global_map, read_frame
-from icmapper.mapping.config import MapperConfig
-from icmapper.mapping.crossings import CrossingMerger
+from icmapper.data.types import Frame, MapClass
+from icmapper.mapping.baselines.common import OnlineMapBaseline
 from icmapper.mapping.methods import MethodInfo, register_method
 from icmapper.mapping.passed import splice_view
 from icmapper.mapping.splice import overlap_fraction
-from icmapper.mapping.types import DetectionSource, StepResult
-
-if TYPE_CHECKING:
-    from icmapper._icmap import GlobalMap
+from icmapper.mapping.types import StepResult
 
 
-class PolyMerge:
+class PolyMerge(OnlineMapBaseline):
     """Rule-based online merging without ids (see the module docstring).
 
     source: detections; score_threshold: detections below are ignored; buffer: overlap distance (m);
@@ -43,30 +36,14 @@ class PolyMerge:
 
     name = "polymerge"
 
-    def __init__(
-        self,
-        source: DetectionSource,
-        config: MapperConfig | None = None,
-        rng: PerceptionRange = RANGE_60x30,
-    ) -> None:
-        cfg = config or MapperConfig()
-        self.source = source
-        self.config = cfg
-        self.score_threshold = cfg.baseline_threshold
-        self.buffer = cfg.polymerge_buffer
-        self.min_overlap = cfg.polymerge_min_overlap
-        self.range = rng
-        self.map: GlobalMap = new_global_map(cfg)
-        self.crossings = CrossingMerger(cfg.crossing_merge, rng)
-
-    def reset(self) -> None:
-        self.source.reset()
-        self.map = new_global_map(self.config)
-        self.crossings.reset()
+    def setup(self) -> None:
+        super().setup()
+        self.buffer = self.config.polymerge_buffer
+        self.min_overlap = self.config.polymerge_min_overlap
 
     def step(self, frame: Frame) -> StepResult:
         """Merges every detection of the frame into an overlapping instance or inserts it."""
-        inp = read_frame(self.source, frame, self.score_threshold)
+        inp = self.read(frame)
         dets = inp.dets
         ids = np.full(len(dets), -1, np.int64)
         inserted: list[int] = []
@@ -100,9 +77,6 @@ class PolyMerge:
                 merged.append(best)
             ids[i] = best
         return StepResult(frame.index, dets, ids, dets.points.copy(), inserted, merged)
-
-    def finish(self) -> GlobalMap:
-        return self.map
 
 
 register_method(

@@ -13,25 +13,18 @@ weakness.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 import numpy as np
 from numpy.typing import NDArray
 
-from icmapper.data.types import Frame, MapClass, PerceptionRange, RANGE_60x30
-from icmapper.mapping.baselines.common import new_global_map, read_frame
-from icmapper.mapping.config import MapperConfig
-from icmapper.mapping.crossings import CrossingMerger
+from icmapper.data.types import Frame, MapClass
+from icmapper.mapping.baselines.common import OnlineMapBaseline
 from icmapper.mapping.methods import MethodInfo, register_method
 from icmapper.mapping.passed import merge_view
 from icmapper.mapping.tracker import Tracker, positional_affinity
-from icmapper.mapping.types import DetectionSource, StepResult
-
-if TYPE_CHECKING:
-    from icmapper._icmap import GlobalMap
+from icmapper.mapping.types import StepResult
 
 
-class PostTrack:
+class PostTrack(OnlineMapBaseline):
     """Post-Track ids + engine merge (see the module docstring).
 
     source: where detections come from. Settings (``MapperConfig``): ``baseline_threshold``
@@ -43,32 +36,20 @@ class PostTrack:
 
     name = "post-track"
 
-    def __init__(
-        self,
-        source: DetectionSource,
-        config: MapperConfig | None = None,
-        rng: PerceptionRange = RANGE_60x30,
-    ) -> None:
-        cfg = config or MapperConfig()
-        self.source = source
-        self.config = cfg
-        self.score_threshold = cfg.baseline_threshold
-        self.range = rng
+    def setup(self) -> None:
+        super().setup()
+        cfg = self.config
         self.tracker = Tracker(
             threshold=float(np.exp(-cfg.gate / cfg.positional_scale)), max_age=cfg.max_age
         )
-        self.map: GlobalMap = new_global_map(cfg)
-        self.crossings = CrossingMerger(cfg.crossing_merge, rng)
 
     def reset(self) -> None:
-        self.source.reset()
+        super().reset()
         self.tracker.reset()
-        self.map = new_global_map(self.config)
-        self.crossings.reset()
 
     def step(self, frame: Frame) -> StepResult:
         """Detects, links detections to tracks, inserts / merges each into the global map."""
-        inp = read_frame(self.source, frame, self.score_threshold)
+        inp = self.read(frame)
         dets = inp.dets
         _, trk_cls, trk_pts, _ = self.tracker.tracks_in_ego(frame.pose)  # (t,), (t, 20, 2)
         scale = self.config.positional_scale
@@ -100,9 +81,6 @@ class PostTrack:
         if MapClass(cls).closed:
             self.crossings.inserted(tid, ego)
         return False
-
-    def finish(self) -> GlobalMap:
-        return self.map
 
 
 register_method(

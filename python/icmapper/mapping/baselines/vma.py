@@ -11,8 +11,6 @@ keeps its id and its bookkeeping (first frame, number of observations).
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial import ConvexHull, QhullError
@@ -22,9 +20,6 @@ from icmapper.mapping.baselines.post_track import PostTrack
 from icmapper.mapping.methods import MethodInfo, register_method
 from icmapper.mapping.passed import splice_view
 from icmapper.mapping.splice import inside_ring, ring_distance
-
-if TYPE_CHECKING:
-    pass
 
 
 class VmaMerge(PostTrack):
