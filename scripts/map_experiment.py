@@ -118,6 +118,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--cache", default="/tmp/icmapper-bev-cache")
     ap.add_argument("--json", default=None)
     ap.add_argument("--maps", default=None, help="folder for each method's .icmap per drive")
+    ap.add_argument(
+        "--min-obs", type=int, default=1, help="leave out map instances observed fewer times"
+    )
     a = ap.parse_args(argv)
 
     vec = replace(VectoriseParams(), **_parse_sets(a.vec, VectoriseParams))
@@ -159,6 +162,8 @@ def main(argv: list[str] | None = None) -> int:
             for i in gmap.ids():
                 cls, pts = gmap.get(int(i))
                 obs = gmap.info(int(i)).get("observations", 1)
+                if obs < a.min_obs:
+                    continue
                 items.append((int(cls), np.asarray(pts), int(cls) == 0, float(obs or 1)))
             maps[n].append(items)
             if a.maps:
