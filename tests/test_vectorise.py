@@ -390,3 +390,52 @@ def test_order_branch_walks_from_the_lowest_end() -> None:
     ring = np.array([[0, 1], [1, 0], [1, 2], [2, 1]])  # every cell has two neighbours
     assert np.array_equal(_order_branch(ring), [[0, 1], [1, 0], [2, 1], [1, 2]])
     assert np.array_equal(_order_branch(np.array([[7, 7]])), [[7, 7]])
+
+
+def _lines_prob(lines: list[np.ndarray], cls: int) -> np.ndarray:
+    """Probabilities (3, 200, 100) on the 0.3 m grid with the polylines ``lines`` (each (n, 2))
+    of class ``cls`` drawn at the targets' line radius."""
+    pts = torch.from_numpy(np.stack([resample_polyline(ln, 20, False) for ln in lines]))
+    mask = rasterise(pts, torch.full((len(lines),), cls), 200, 100, HX, HY, line_radius=0.225)
+    return 0.05 + 0.9 * mask.numpy()
+
+
+@pytest.mark.parametrize("cls", [1, 2])
+def test_a_line_goes_on_through_a_junction_and_spurs_are_dropped(cls: int) -> None:
+    """A kerb or lane line with a 3 m spur at its middle, and two lines crossing: joined through
+    their junctions (one instance per line), the spur dropped; cut at the junctions without."""
+    main = np.array([[-20.0, 0.0], [20.0, 0.0]])
+    spur = np.array([[0.0, 0.0], [0.0, 3.0]])
+    prob = _lines_prob([main, spur], cls)
+    joined = vectorise(prob, HX, HY, VectoriseParams(upsample=1))
+    (one,) = [p for c, p in zip(joined.classes, joined.points, strict=True) if c == cls]
+    assert _chamfer(_dense(one.astype(np.float64)), _dense(main)) < 0.2
+    cut = vectorise(prob, HX, HY, VectoriseParams(upsample=1, through=0.0, spur=0.0))
+    assert int((cut.classes == cls).sum()) == 3  # two halves and the spur
+    # a line across another (an X) stays two lines
+    other = np.array([[-8.0, -8.0], [8.0, 8.0]])
+    cross = vectorise(_lines_prob([main, other], cls), HX, HY, VectoriseParams(upsample=1))
+    got = [
+        p.astype(np.float64) for c, p in zip(cross.classes, cross.points, strict=True) if c == cls
+    ]
+    assert len(got) == 2
+    for truth in (main, other):
+        assert min(_chamfer(_dense(g), _dense(truth)) for g in got) < 0.3
+
+
+def test_a_long_branch_at_a_junction_is_kept() -> None:
+    """A T of two kerbs: the through kerb joined, the 10 m stem kept as its own instance."""
+    main = np.array([[-20.0, 0.0], [20.0, 0.0]])
+    stem = np.array([[0.0, 0.0], [0.0, -10.0]])
+    inst = vectorise(_lines_prob([main, stem], 2), HX, HY, VectoriseParams(upsample=1))
+    got = [p.astype(np.float64) for c, p in zip(inst.classes, inst.points, strict=True) if c == 2]
+    assert len(got) == 2
+    assert min(_chamfer(_dense(g), _dense(main)) for g in got) < 0.2
+    assert min(_chamfer(_dense(g), _dense(stem)) for g in got) < 0.5
+
+
+def test_through_and_spur_are_checked() -> None:
+    with pytest.raises(ValueError, match="through"):
+        VectoriseParams(through=-1.0)
+    with pytest.raises(ValueError, match="spur"):
+        VectoriseParams(spur=float("nan"))
