@@ -13,6 +13,10 @@ and errors list the registry.
                        edge, ringing it (some skewed), as in Argoverse 2 (for training)
     sim-city:<split>:INDEX:N
                        N drives through one synthetic city (city INDEX of the split)
+    sim-city-changed:<split>:INDEX:N[:SEED]
+                       the same N drives through that city after changes near them (crossings
+                       added and removed, lane lines removed, added, moved, a kerb moved; seeded;
+                       ``data.sim.changes``: the true changes)
     av2:PATH[:split]   the drive of an Argoverse 2 log, or of every log in a folder of logs (a
                        split keeps the logs named in a split file: `split_file=` or
                        <PATH>/splits.json)
@@ -280,6 +284,23 @@ def _open_sim_city(spec: str, rest: str, o: SourceOptions) -> list[Sequence]:
     return sim.sim_city_drives(parts[0], index, _count(parts[2], spec), image_size=o.image_size)
 
 
+def _open_sim_city_changed(spec: str, rest: str, o: SourceOptions) -> list[Sequence]:
+    from icmapper.data.sim.changes import changed_city_drives
+
+    parts = rest.split(":")
+    if len(parts) not in (3, 4) or parts[0] not in SIM_SPLITS:
+        raise ValueError(
+            f"bad source spec {spec!r}: expected "
+            f"sim-city-changed:<{'|'.join(SIM_SPLITS)}>:INDEX:N[:SEED]"
+        )
+    try:
+        index, seed = int(parts[1]), int(parts[3]) if len(parts) == 4 else 0
+    except ValueError:
+        raise ValueError(f"bad source spec {spec!r}: the index and seed must be ints") from None
+    num = _count(parts[2], spec)
+    return changed_city_drives(parts[0], index, num, seed, image_size=o.image_size)[0]
+
+
 def _open_av2(spec: str, rest: str, o: SourceOptions) -> list[Sequence]:
     from icmapper.data import av2
     from icmapper.data.errors import DataError
@@ -359,6 +380,15 @@ register_source(
         "sim-city:<split>:INDEX:N",
         "N drives through one synthetic city (city INDEX of the split): a city run",
         _open_sim_city,
+    )
+)
+register_source(
+    SourceKind(
+        "sim-city-changed",
+        "sim-city-changed:<split>:INDEX:N[:SEED]",
+        "the N drives of sim-city:<split>:INDEX:N through that city after changes near them "
+        "(seeded; the true changes: icmapper.data.sim.changes)",
+        _open_sim_city_changed,
     )
 )
 register_source(

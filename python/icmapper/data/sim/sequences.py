@@ -84,12 +84,18 @@ def sim_sequences(
 
 
 def sim_city_drives(
-    split: str, index: int, num: int, image_size: tuple[int, int] = (128, 352)
+    split: str,
+    index: int,
+    num: int,
+    image_size: tuple[int, int] = (128, 352),
+    world: WorldMap | None = None,
 ) -> list[Sequence]:
     """`num` drives through ONE synthetic city: city ``CITY_SEEDS[split][index]``, drive seeds
     0..num-1 (random start lanes, turns and lengths along the same lane graph, so routes overlap
     and cross each other in both directions), each starting at its own time of day (timestamps
-    offset by a seeded start in [0, 12 h)). Named "sim-<city>-<k>"; all share one WorldMap."""
+    offset by a seeded start in [0, 12 h)). Named "sim-<city>-<k>"; all share one WorldMap
+    (``world``: that city as given, e.g. changed by ``sim.changes``; its lane graph must be the
+    city's, so that the drives are the same)."""
     if split not in CITY_SEEDS:
         raise ValueError(f"unknown split {split!r}; expected one of {sorted(CITY_SEEDS)}")
     cities = CITY_SEEDS[split]
@@ -98,7 +104,7 @@ def sim_city_drives(
     if num < 1:
         raise ValueError(f"num must be >= 1, got {num}")
     city = cities[index]
-    world = generate_city(city)
+    world = generate_city(city) if world is None else world
     out = []
     for k in range(num):
         seq = sim_sequence(city, k, image_size, world=world)
