@@ -8,9 +8,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from icmapper.data.sim.changes import CHANGE_TYPES, changed_city_drives, spec_true_changes
+from icmapper.data.sim.changes import changed_city_drives, spec_true_changes
 from icmapper.data.sim.sequences import sim_city_drives
 from icmapper.data.sources import open_source
+from icmapper.data.types import CHANGE_TYPES
 
 
 def test_changed_city_is_the_same_city_with_known_changes() -> None:

@@ -156,7 +156,7 @@ GEOJSON_SCHEMA = "icmapper-map-geojson"
 GEOJSON_VERSION = 1
 
 
-def _geometry(coords: list[list[float]], closed: bool) -> dict[str, Any]:
+def feature_geometry(coords: list[list[float]], closed: bool) -> dict[str, Any]:
     """A LineString, or for a crossing a Polygon whose ring is closed and counter-clockwise (the
     exterior orientation RFC 7946 asks for)."""
     if not closed:
@@ -196,10 +196,21 @@ def map_geojson(gmap: GlobalMap, local_frame: str = "", wgs84: bool = False) -> 
             {
                 "type": "Feature",
                 "id": int(i),
-                "geometry": _geometry(coords, bool(info["closed"])),
+                "geometry": feature_geometry(coords, bool(info["closed"])),
                 "properties": props,
             }
         )
+    return {
+        "type": "FeatureCollection",
+        "features": features,
+        "icmapper": frame_member(local_frame, gf),
+    }
+
+
+def frame_member(local_frame: str, gf: GeoFrame | None = None) -> dict[str, Any]:
+    """The foreign member ``icmapper`` of the project's GeoJSON files: the schema and the frame
+    (``crs``, ``local_frame``, ``conversion``); ``gf``: the frame converted to WGS84, None for
+    the local map frame's metres."""
     if gf is not None:
         crs = "WGS84 longitude, latitude in degrees (RFC 7946; EPSG:4326 axis order lon, lat)"
         conversion = gf.describe
@@ -208,15 +219,11 @@ def map_geojson(gmap: GlobalMap, local_frame: str = "", wgs84: bool = False) -> 
         crs = f"local map frame, metres: {where} x, y (not WGS84)"
         conversion = "none: the map frame's coordinates as stored"
     return {
-        "type": "FeatureCollection",
-        "features": features,
-        "icmapper": {
-            "schema": GEOJSON_SCHEMA,
-            "version": GEOJSON_VERSION,
-            "crs": crs,
-            "local_frame": local_frame,
-            "conversion": conversion,
-        },
+        "schema": GEOJSON_SCHEMA,
+        "version": GEOJSON_VERSION,
+        "crs": crs,
+        "local_frame": local_frame,
+        "conversion": conversion,
     }
 
 

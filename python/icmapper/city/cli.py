@@ -21,10 +21,11 @@ def add_city_arguments(p: argparse.ArgumentParser) -> None:
     )
     g.add_argument(
         "--city-mode",
-        choices=MODES,
+        choices=(*MODES, "update"),
         default="merge",
         help="merge: drives mapped alone then merged by the engine (parallel with --workers); "
-        "continue: one mapper continues the city map drive after drive",
+        "continue: one mapper continues the city map drive after drive; update: drives after "
+        "the map was made: what changed is detected and the city map updated (changes.geojson)",
     )
     g.add_argument(
         "--workers",
@@ -59,6 +60,8 @@ def cmd_city(args: argparse.Namespace, config: Any, image_size: tuple[int, int])
     from icmapper.city.run import build_city
     from icmapper.mapping.run import DetectionInput
 
+    if args.city_mode == "update":
+        return cmd_update(args, image_size)
     if args.detections.startswith("file:") and len(args.source) != 1:
         raise ValueError("a city run from a prediction file takes one --source")
     note = workers_note(args.workers, city=True)
@@ -84,4 +87,16 @@ def cmd_city(args: argparse.Namespace, config: Any, image_size: tuple[int, int])
     print(f"wrote {args.city}: city map of {ok} drive(s) ({len(manifest.drives) - ok} failed)")
     if ok:
         print(city_table(evaluate_city(args.city)), end="")
+    return 0
+
+
+def cmd_update(args: argparse.Namespace, image_size: tuple[int, int]) -> int:
+    from icmapper.city.update_run import changes_table, update_city
+
+    result = update_city(
+        Path(args.city), args.source, args.detections, args.checkpoint, args.device,
+        args.seed, image_size, progress=not args.no_progress,
+    )  # fmt: skip
+    print(changes_table(result), end="")
+    print(f"wrote {result.folder} and {Path(args.city) / 'changes.geojson'}")
     return 0

@@ -397,3 +397,21 @@ def visited_gt(
                 MapInstance(inst.id * PIECE_FACTOR + j, inst.cls, part, inst.closed, inst.style)
             )
     return out
+
+
+def in_range_counts(
+    points: NDArray[np.float64],
+    poses: NDArray[np.float64],
+    rng: PerceptionRange,
+    margin: float = 0.0,
+) -> NDArray[np.int64]:
+    """Per point of ``points`` (m, 2) world frame: how many of ``poses`` (T, 4, 4) hold it in
+    their range shrunk by ``margin`` metres (negative: grown)."""
+    pts = np.asarray(points, np.float64).reshape(-1, 2)
+    if len(poses) == 0 or len(pts) == 0:
+        return np.zeros(len(pts), np.int64)
+    rel = pts[None, :, :] - poses[:, None, :2, 3]  # (T, m, 2)
+    ego = np.einsum("tmk,tkj->tmj", rel, poses[:, :2, :2])  # (T, m, 2): R^T (p - t)
+    hx, hy = rng.half_x - margin, rng.half_y - margin
+    inside = (np.abs(ego[..., 0]) <= hx) & (np.abs(ego[..., 1]) <= hy)  # (T, m)
+    return inside.sum(axis=0)

@@ -34,6 +34,8 @@ class MapClass(enum.IntEnum):
 
 CLASS_NAMES: tuple[str, ...] = ("ped_crossing", "divider", "boundary")
 NUM_CLASSES = len(CLASS_NAMES)
+#: How a map element changes on the road (city updates, issue 32), in this order.
+CHANGE_TYPES: tuple[str, ...] = ("added", "removed", "moved")
 
 
 @dataclass(frozen=True)

@@ -28,6 +28,7 @@ import shapely
 from numpy.typing import NDArray
 from shapely.geometry import LineString, MultiLineString, Polygon
 
+from icmapper.data.gt import in_range_counts
 from icmapper.data.sim.geometry import arc_length, offset_curve, sub_curve, tangents
 from icmapper.data.types import (
     CLASS_NAMES,
@@ -40,8 +41,6 @@ from icmapper.data.types import (
     pose_to_xy_yaw,
 )
 
-#: The change types of a report, in this order.
-CHANGE_TYPES: tuple[str, ...] = ("added", "removed", "moved")
 #: Minimum distance (m) between the geometries of two changes of one world.
 CHANGE_SPACING = 15.0
 
@@ -129,16 +128,6 @@ def _visible_counts(
     return counts
 
 
-def _frames_in_range(
-    points: NDArray[np.float64], poses: NDArray[np.float64], rng: PerceptionRange
-) -> NDArray[np.int64]:
-    """Per point of points (m, 2): the number of poses (T, 4, 4) whose range holds it."""
-    rel = points[None, :, :] - poses[:, None, :2, 3]  # (T, m, 2)
-    ego = np.einsum("tmk,tkj->tmj", rel, poses[:, :2, :2])  # (T, m, 2): R^T (p - t)
-    inside = (np.abs(ego[..., 0]) <= rng.half_x) & (np.abs(ego[..., 1]) <= rng.half_y)  # (T, m)
-    return inside.sum(axis=0)
-
-
 def _min_dist(a: NDArray[np.float64], others: list[NDArray[np.float64]]) -> float:
     """Smallest distance from the polyline a (n, 2) to any polyline of ``others``."""
     if not others:
@@ -187,7 +176,7 @@ class _Builder:
         """The longest stretch (k, 2) of the polyline ``points`` (densified to 1 m) whose points
         are in range of >= 3 poses; (0, 2) when none."""
         dense = _dense(points)  # (m, 2)
-        seen = np.concatenate([[0], _frames_in_range(dense, self.poses, self.rng) >= 3, [0]])
+        seen = np.concatenate([[0], in_range_counts(dense, self.poses, self.rng) >= 3, [0]])
         edges = np.flatnonzero(np.diff(seen.astype(np.int64)))  # run starts and ends
         if len(edges) == 0:
             return np.zeros((0, 2))
@@ -285,10 +274,7 @@ class _Builder:
             ring = np.array([right - 2 * t, right + 2 * t, left + 2 * t, left - 2 * t])  # (4, 2)
             if not self.spaced(ring) or _min_dist(ring, crossings) < 10.0:
                 continue
-            if (
-                Polygon(ring).area < 20.0
-                or (_frames_in_range(ring, self.poses, self.rng) < 3).any()
-            ):
+            if Polygon(ring).area < 20.0 or (in_range_counts(ring, self.poses, self.rng) < 3).any():
                 continue
             self._add(MapClass.PED_CROSSING, ring, True, "zebra")
             return True
@@ -305,7 +291,7 @@ class _Builder:
             total = span + 2 * ramp
             if s[-1] < total + 4.0:
                 continue
-            seen = _frames_in_range(dense, self.poses, self.rng) >= 3  # (m,)
+            seen = in_range_counts(dense, self.poses, self.rng) >= 3  # (m,)
             for s0 in self.rnd.uniform(1.0, s[-1] - total - 1.0, 12).tolist():
                 window = (s >= s0) & (s <= s0 + total)  # (m,)
                 if not seen[window].all():
@@ -322,10 +308,11 @@ class _Builder:
                 new_sec = sec + (out * d * w)[:, None] * nrm  # (w, 2)
                 if not self.spaced(new_sec):
                     continue
-                if _min_dist(new_sec, self.of_class(MapClass.BOUNDARY, skip=inst.id)) < 1.5:
+                # the road widens into the sidewalk: nothing else within 5 m of the new kerb
+                if _min_dist(new_sec, self.of_class(MapClass.BOUNDARY, skip=inst.id)) < 5.0:
                     continue
                 rest = [dense[s < s0 - 3.0], dense[s > s0 + total + 3.0]]
-                if _min_dist(new_sec, [r for r in rest if len(r) > 1]) < 1.5:
+                if _min_dist(new_sec, [r for r in rest if len(r) > 1]) < 5.0:
                     continue
                 others = self.of_class(MapClass.DIVIDER) + self.of_class(MapClass.PED_CROSSING)
                 if _min_dist(new_sec, others) < 1.0:
