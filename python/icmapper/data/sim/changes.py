@@ -292,10 +292,13 @@ class _Builder:
             if s[-1] < total + 4.0:
                 continue
             seen = in_range_counts(dense, self.poses, self.rng) >= 3  # (m,)
-            for s0 in self.rnd.uniform(1.0, s[-1] - total - 1.0, 12).tolist():
+            width = int(np.ceil(total / 0.5)) + 1  # points of a window
+            cum = np.concatenate([[0], np.cumsum(~seen)])  # unseen points before each index
+            starts = np.flatnonzero(cum[width:] == cum[:-width])  # windows seen throughout
+            starts = starts[(s[starts] > 1.0) & (s[starts] < s[-1] - total - 1.0)]
+            for j in self.rnd.permutation(starts)[:12].tolist():
+                s0 = float(s[j])
                 window = (s >= s0) & (s <= s0 + total)  # (m,)
-                if not seen[window].all():
-                    continue
                 sec = dense[window]  # (w, 2)
                 u = s[window] - s0  # (w,)
                 w = np.clip(np.minimum(u, total - u) / ramp, 0.0, 1.0)  # (w,)
@@ -311,7 +314,7 @@ class _Builder:
                 # the road widens into the sidewalk: nothing else within 5 m of the new kerb
                 if _min_dist(new_sec, self.of_class(MapClass.BOUNDARY, skip=inst.id)) < 5.0:
                     continue
-                rest = [dense[s < s0 - 3.0], dense[s > s0 + total + 3.0]]
+                rest = [dense[s < s0 - 10.0], dense[s > s0 + total + 10.0]]  # not its ramps
                 if _min_dist(new_sec, [r for r in rest if len(r) > 1]) < 5.0:
                     continue
                 others = self.of_class(MapClass.DIVIDER) + self.of_class(MapClass.PED_CROSSING)
