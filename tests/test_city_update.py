@@ -6,12 +6,29 @@ report and its evaluation against the true changes."""
 
 from __future__ import annotations
 
+import json
+from dataclasses import replace
+from pathlib import Path
+from typing import TYPE_CHECKING
+
 import numpy as np
 import pytest
 from icmapper.data.sim.changes import changed_city_drives, spec_true_changes
 from icmapper.data.sim.sequences import sim_city_drives
 from icmapper.data.sources import open_source
-from icmapper.data.types import CHANGE_TYPES
+from icmapper.data.types import (
+    CHANGE_TYPES,
+    MapClass,
+    MapInstance,
+    RANGE_60x30,
+    Sequence,
+    WorldMap,
+    xy_yaw_to_pose,
+)
+
+if TYPE_CHECKING:
+    from icmapper._icmap import GlobalMap
+    from icmapper.city.update_run import UpdateResult
 
 
 def test_changed_city_is_the_same_city_with_known_changes() -> None:
@@ -59,3 +76,243 @@ def test_changed_city_is_the_same_city_with_known_changes() -> None:
     ]
     with pytest.raises(ValueError, match="INDEX:N"):
         open_source("sim-city-changed:val:0")
+
+
+# ---------------------------------------------------------------------- the change detector
+def _world(extra: list[tuple[int, int, np.ndarray]]) -> WorldMap:
+    """A straight road along x: dividers at y = 0 (id 1) and 3.5 (id 2), kerbs at y = -3.5 (3)
+    and 7 (4), a crossing at x in [8, 12] (5), plus ``extra`` (id, cls, points)."""
+    x = np.linspace(-60.0, 60.0, 121)  # (121,)
+    line = lambda y: np.stack([x, np.full_like(x, y)], axis=1)  # noqa: E731
+    items = [
+        (1, MapClass.DIVIDER, line(0.0)),
+        (2, MapClass.DIVIDER, line(3.5)),
+        (3, MapClass.BOUNDARY, line(-3.5)),
+        (4, MapClass.BOUNDARY, line(7.0)),
+        (5, MapClass.PED_CROSSING, np.array([[8.0, -3.5], [12.0, -3.5], [12.0, 7.0], [8.0, 7.0]])),
+    ] + [(i, MapClass(c), p) for i, c, p in extra]
+    return WorldMap(
+        "hand-made", [MapInstance(i, c, np.asarray(p, float), c == 0) for i, c, p in items]
+    )
+
+
+def _drive(world: WorldMap, name: str = "d") -> Sequence:
+    from icmapper.data.sim.rig import nuscenes_rig
+
+    xs = np.arange(-30.0, 31.0, 3.0)  # (T,) an ego along y = 1.75 every 3 m
+    poses = np.stack([xy_yaw_to_pose(float(x), 1.75, 0.0) for x in xs])  # (T, 4, 4)
+    return Sequence(name, "sim", world, np.arange(len(xs)) * 0.5, poses, nuscenes_rig((8, 8)))
+
+
+def _stored(world: WorldMap) -> GlobalMap:
+    from icmapper._icmap import GlobalMap
+
+    gm = GlobalMap()
+    for m in world.instances:
+        gm.insert_with_id(m.id, int(m.cls), m.points)
+    return gm
+
+
+def _detect(stored: WorldMap, now: WorldMap, noise: str = "low") -> list:
+    from icmapper.city.update import ChangeDetector
+    from icmapper.mapping.oracle import OracleDetector
+
+    gm = _stored(stored)
+    det = ChangeDetector(gm, RANGE_60x30, lambda p: np.ones(len(p), bool))
+    seq = _drive(now)
+    oracle = OracleDetector(seq, RANGE_60x30, noise, seed=3)
+    for i in range(len(seq)):
+        fr = seq.frame(i, with_images=False)
+        d = oracle.detect(fr)
+        det.observe((7, i), fr.pose, d.classes, d.scores, d.points)
+    return det.decide()
+
+
+def _only(world: WorldMap, keep: set[int], extra: list | None = None) -> WorldMap:
+    w = _world(extra or [])
+    w.instances = [m for m in w.instances if m.id in keep or m.id > 5]
+    return w
+
+
+ALL = {1, 2, 3, 4, 5}
+
+
+@pytest.mark.parametrize("noise", ["low", "medium"])
+def test_unchanged_road_gives_no_change(noise: str) -> None:
+    assert _detect(_world([]), _world([]), noise) == []
+
+
+def test_removed_divider_and_crossing() -> None:
+    changes = _detect(_world([]), _only(_world([]), ALL - {2, 5}))
+    assert sorted((c.change, c.cls, c.instance) for c in changes) == [
+        ("removed", 0, 5), ("removed", 1, 2)
+    ]  # fmt: skip
+    ev = next(c for c in changes if c.instance == 2).evidence
+    assert len(ev.missed) >= 3 and len(ev.missed) >= 0.8 * len(ev.expected)
+    assert {d for d, _ in ev.expected} == {7}  # the drive and frames that confirmed it
+
+
+def test_moved_divider() -> None:
+    world = _world([])
+    now = _world([])
+    now.instances[1] = replace(now.instances[1], points=now.instances[1].points + [0.0, -1.0])
+    (ch,) = _detect(world, now)
+    assert (ch.change, ch.cls, ch.instance) == ("moved", 1, 2)
+    assert ch.offset == pytest.approx(-1.0, abs=0.15)
+    assert ch.new_points is not None
+    np.testing.assert_allclose(ch.new_points[:, 1], 2.5, atol=0.15)  # the whole line moved
+
+
+def test_moved_kerb_section() -> None:
+    now = _world([])
+    pts = now.instances[3].points.copy()  # the kerb at y = 7
+    bump = np.clip((12.0 - np.abs(pts[:, 0])) / 4.0, 0.0, 1.0)  # 16 m at 2.5 m, 4 m ramps
+    pts[:, 1] += 2.5 * bump
+    now.instances[3] = replace(now.instances[3], points=pts)
+    (ch,) = _detect(_world([]), now)
+    assert (ch.change, ch.cls, ch.instance) == ("moved", 2, 4)
+    assert ch.new_points is not None
+    y = np.interp([-40.0, 0.0, 40.0], ch.new_points[:, 0], ch.new_points[:, 1])
+    assert y[1] == pytest.approx(9.5, abs=0.3)  # moved where it moved
+    assert y[0] == 7.0 and y[2] == 7.0  # untouched elsewhere
+
+
+def test_added_divider_and_crossing() -> None:
+    x = np.linspace(-20.0, 20.0, 41)
+    lane = np.stack([x, np.full_like(x, 5.25)], axis=1)  # a new lane line between 2 and the kerb
+    zebra = np.array([[-12.0, -3.5], [-8.0, -3.5], [-8.0, 7.0], [-12.0, 7.0]])
+    changes = _detect(_world([]), _world([(6, 1, lane), (7, 0, zebra)]))
+    assert sorted((c.change, c.cls) for c in changes) == [("added", 0), ("added", 1)]
+    for c in changes:
+        truth = zebra if c.cls == 0 else lane
+        from icmapper.city.update_eval import change_distance
+
+        assert change_distance(c.points, c.closed, truth, c.cls == 0) < 0.3
+
+
+# ---------------------------------------------------------------------- the update mode
+def _quiet(*_: object) -> None:
+    pass
+
+
+@pytest.fixture(scope="module")
+def mapped_city(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A city map of sim-city:val:0:3 (oracle:low), copied by each test that updates it."""
+    from icmapper.city.drives import CitySettings
+    from icmapper.city.run import build_city
+    from icmapper.mapping.config import MapperConfig
+
+    city = tmp_path_factory.mktemp("city") / "base"
+    settings = CitySettings("icmapper", "oracle:low", None, MapperConfig().to_dict(), (32, 88))
+    build_city(city, ["sim-city:val:0:3"], settings, "60x30", pictures=False, log=_quiet,
+               progress=False)  # fmt: skip
+    return city
+
+
+def _copy(src: Path, dst: Path) -> Path:
+    import shutil
+
+    shutil.copytree(src, dst)
+    return dst
+
+
+def _update(city: Path, spec: str = "sim-city-changed:val:0:3:1") -> UpdateResult:
+    from icmapper.city.update_run import update_city
+
+    return update_city(city, [spec], "oracle:low", log=_quiet, progress=False)
+
+
+def test_update_applies_the_changes_and_keeps_the_rest(mapped_city: Path, tmp_path: Path) -> None:
+    from icmapper._icmap import GlobalMap
+    from icmapper.city.changes_report import read_changes
+    from icmapper.city.update_eval import evaluate_update, update_table
+    from icmapper.city.update_run import read_updates
+
+    city = _copy(mapped_city, tmp_path / "city")
+    before = GlobalMap.load(str(city / "city.icmap"))
+    result = _update(city)
+    after = GlobalMap.load(str(city / "city.icmap"))
+    road = [c for c in result.changes if c.cause == "road"]
+    assert {c.change for c in road} == set(CHANGE_TYPES)
+    touched = {c.instance for c in road}
+    for i in before.ids().tolist():  # unchanged instances byte-identical
+        if i not in touched:
+            assert after.info(i) == before.info(i)
+            assert after.get(i)[1].tobytes() == before.get(i)[1].tobytes()
+    drive = result.entry.drives[0][0]
+    assert drive == 3  # above the city's drives 0-2
+    for c in road:
+        if c.change == "removed":
+            assert c.instance not in after
+        else:  # provenance: the update's drives
+            assert set(after.info(c.instance)["drives"]) & {d for d, _ in result.entry.drives}
+    assert (city / "changes.geojson").read_bytes() == (
+        result.folder / "changes.geojson"
+    ).read_bytes()
+    listed = read_changes(city / "changes.geojson")
+    assert len(listed) == len(result.changes)
+    raw = json.loads((city / "changes.geojson").read_text())
+    props = raw["features"][0]["properties"]
+    assert {"change", "class", "instance", "drive", "evidence"} <= set(props)
+    assert {"expected", "seen", "missed", "frames"} <= set(props["evidence"])
+    assert raw["icmapper"]["schema"] == "icmapper-map-geojson"
+    assert read_updates(city).updates[0].counts == {
+        t: sum(c.change == t for c in road) for t in CHANGE_TYPES
+    }
+    assert GlobalMap.load(str(result.folder / "before.icmap")).to_bytes() == before.to_bytes()
+    r = evaluate_update(city)
+    for t in CHANGE_TYPES:
+        assert r["changes"]["by_type"][t]["recall"] == 1.0, t
+    assert r["wrongly_changed"] == 0.0
+    m = r["maps"]
+    assert m["updated"]["mCD"] < 0.75 * m["never_updated"]["mCD"]
+    assert m["updated"]["mCD"] <= 1.1 * m["from_scratch"]["mCD"]
+    assert "| moved | all |" in update_table(r)
+    again = _update(city)  # the same drives again: nothing to do
+    assert again.entry.drives == [] and again.changes == []
+
+
+def test_drive_of_another_city_is_refused(mapped_city: Path, tmp_path: Path) -> None:
+    city = _copy(mapped_city, tmp_path / "city")
+    was = (city / "city.icmap").read_bytes()
+    with pytest.raises(ValueError, match="sim-city-10001.*is of 'sim-city-10000'"):
+        _update(city, "sim-city-changed:val:1:2:0")
+    assert (city / "city.icmap").read_bytes() == was
+    assert not (city / "updates.json").exists() and not (city / "updates").exists()
+
+
+def test_city_folder_of_another_version_is_refused(mapped_city: Path, tmp_path: Path) -> None:
+    city = _copy(mapped_city, tmp_path / "city")
+    manifest = json.loads((city / "city.json").read_text())
+    manifest["version"] = 2
+    (city / "city.json").write_text(json.dumps(manifest))
+    with pytest.raises(ValueError, match=r"city\.json: version 2, this build reads 1"):
+        _update(city)
+    manifest["version"] = 1
+    (city / "city.json").write_text(json.dumps(manifest))
+    (city / "updates.json").write_text(json.dumps({"format": "icmapper-city-updates",
+                                                   "version": 9, "updates": []}))  # fmt: skip
+    with pytest.raises(ValueError, match=r"updates\.json: version 9"):
+        _update(city)
+
+
+def test_failed_save_leaves_the_old_map(
+    mapped_city: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import icmapper.city.changes_report as report
+
+    city = _copy(mapped_city, tmp_path / "city")
+    was = (city / "city.icmap").read_bytes()
+
+    def killed(*_: object, **__: object) -> None:
+        raise KeyboardInterrupt("killed mid-save")
+
+    monkeypatch.setattr(report, "plot_changes", killed)  # the last write before the commit
+    with pytest.raises(KeyboardInterrupt):
+        _update(city)
+    assert (city / "city.icmap").read_bytes() == was
+    assert not (city / "updates.json").exists() and not (city / "changes.geojson").exists()
+    assert not list(city.glob(".*tmp*"))  # no temp file left behind
+    monkeypatch.undo()
+    result = _update(city)  # a rerun completes the update
+    assert result.changes and (city / "city.icmap").read_bytes() != was

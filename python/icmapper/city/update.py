@@ -67,7 +67,7 @@ class UpdateConfig:
     seen_share: float = 0.3
     remove_frames: int = 3
     remove_share: float = 0.8
-    move_threshold: tuple[float, float, float] = (np.inf, 0.3, 1.0)  # per class
+    move_threshold: tuple[float, float, float] = (np.inf, 0.4, 1.0)  # per class
     move_obs: int = 3
     move_length: tuple[float, float, float] = (np.inf, 4.0, 8.0)  # per class
     min_add_length: float = 3.0
