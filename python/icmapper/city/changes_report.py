@@ -102,8 +102,9 @@ def plot_changes(
     title: str = "",
 ) -> None:
     """Writes a PNG of an update (atomically): the city map before it, unchanged instances grey,
-    removed red, added green, moved orange (the stored line dashed), each change ringed and
-    numbered as in the report; the drives' paths dotted."""
+    removed red, added green, moved orange (the stored line dashed), map errors (changes the
+    city's own drives saw before: reported, not applied) in short dashes, each change ringed
+    and numbered as in the report; the drives' paths dotted."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -114,7 +115,14 @@ def plot_changes(
 
     gmap = GlobalMap.load(str(before))
     touched = {ch.instance for ch in changes if ch.change != "added"}
-    fig, ax = plt.subplots(figsize=(9, 9))
+    xy = np.concatenate(
+        [np.asarray(gmap.get(int(i))[1]) for i in gmap.ids().tolist()]
+        + [np.asarray(ch.points) for ch in changes]
+        + [np.zeros((0, 2))]
+    )  # (N, 2) everything drawn
+    span = np.ptp(xy, axis=0) + 20.0 if len(xy) else np.array([100.0, 100.0])  # (2,)
+    aspect = float(np.clip(span[1] / span[0], 0.4, 2.5))
+    fig, ax = plt.subplots(figsize=(11.0, 1.0 + 8.0 * aspect))
 
     def draw(pts: np.ndarray, closed: bool, **kw: Any) -> None:
         p = np.vstack([pts, pts[:1]]) if closed else pts
@@ -132,9 +140,11 @@ def plot_changes(
         colour = CHANGE_COLOURS[ch.change]
         if ch.before is not None:
             draw(np.asarray(ch.before), ch.closed, color="0.3", lw=1.2, ls="--")
-        draw(np.asarray(ch.points), ch.closed, color=colour, lw=2.4)
+        road = ch.cause == "road"
+        draw(np.asarray(ch.points), ch.closed, color=colour, lw=2.4 if road else 1.6,
+             ls="-" if road else (0, (2, 1)))  # fmt: skip
         c = np.asarray(ch.points).mean(axis=0)
-        r = max(6.0, 0.5 * float(np.ptp(np.asarray(ch.points), axis=0).max()) + 3.0)
+        r = min(12.0, max(5.0, 0.5 * float(np.ptp(np.asarray(ch.points), axis=0).max()) + 2.0))
         ax.add_patch(plt.Circle(tuple(c), r, fill=False, color=colour, lw=1.0))
         ax.annotate(str(k), tuple(c + r * 0.75), color=colour, fontsize=9, weight="bold")
     handles = [
@@ -142,6 +152,9 @@ def plot_changes(
         for n in ("unchanged", "removed", "added", "moved")
     ]
     handles.append(plt.Line2D([], [], color="0.3", lw=1.2, ls="--", label="moved: before"))
+    handles.append(
+        plt.Line2D([], [], color="0.3", lw=1.6, ls=(0, (2, 1)), label="map error (not applied)")
+    )
     handles.append(plt.Line2D([], [], color="tab:blue", lw=0.7, ls=(0, (1, 3)), label="drives"))
     ax.legend(handles=handles, loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=9)
     ax.set_aspect("equal")
@@ -150,5 +163,5 @@ def plot_changes(
     ax.set_title(title)
     fig.tight_layout()
     with atomic_path(out_path) as tmp:
-        fig.savefig(tmp, dpi=110)
+        fig.savefig(tmp, dpi=110, bbox_inches="tight")
     plt.close(fig)

@@ -54,6 +54,7 @@ def evaluate_city(city: str | os.PathLike) -> dict[str, Any]:
             r["mapping"] = None
         drives.append(r)
     maps = [r["mapping"] for r in drives if r.get("mapping") is not None]
+    updates = _updates(city)
     mean = single_drive_mean(maps) if manifest.mode != "continue" else None
     return {
         "method": manifest.method,
@@ -64,7 +65,19 @@ def evaluate_city(city: str | os.PathLike) -> dict[str, Any]:
         "city": city_metrics,
         "single_drive_mean": mean,
         "drives": drives,
+        "updates": updates,
     }
+
+
+def _updates(city: Path) -> list[dict[str, Any]]:
+    """``update_eval.evaluate_update`` of every update of the city whose true changes are known
+    (docs/eval.md, "City updates")."""
+    from icmapper.city.update_eval import evaluate_update
+    from icmapper.city.update_run import read_updates
+
+    return [
+        evaluate_update(city, k) for k, u in enumerate(read_updates(city).updates) if u.true_changes
+    ]
 
 
 def single_drive_mean(maps: list[dict[str, Any]]) -> dict[str, Any]:
@@ -114,4 +127,7 @@ def city_table(result: dict[str, Any]) -> str:
             "Continue mode: each drive's map is the city map as it stood after that drive, so "
             "only the city map is scored (the drives' rows give per-frame metrics)."
         )
-    return f"## City run: {result['method']}\n\n{mapping_table(rows)}\n\n{note}\n"
+    from icmapper.city.update_eval import update_table
+
+    updates = "".join(f"\n{update_table(u)}" for u in result.get("updates", []))
+    return f"## City run: {result['method']}\n\n{mapping_table(rows)}\n\n{note}\n{updates}"

@@ -303,7 +303,8 @@ def _save(
         )
     plot_changes(
         folder / "before.icmap", changes, seqs, folder / "changes.png",
-        title=f"update {entry.index} of {city.name}: {len(changes)} change(s)",
+        title=f"update {entry.index} of {city.name}: {sum(entry.counts.values())} change(s) of "
+        f"the road, {len(changes) - sum(entry.counts.values())} map error(s)",
     )  # fmt: skip
     gmap.save(str(city / CITY_MAP), compact=True)  # the commit point
     updates.updates.append(entry)
