@@ -132,7 +132,7 @@ impl GlobalMap {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::store::MapConfig;
+    use crate::merge_map::tests::{map, rect};
     use crate::types::{MapClass, Point};
 
     fn line(x0: f64, x1: f64, y: f64) -> Vec<Point> {
@@ -142,25 +142,16 @@ mod tests {
             .collect()
     }
 
-    fn rect(cx: f64, cy: f64, hx: f64, hy: f64) -> Vec<Point> {
-        vec![
-            Point::new(cx - hx, cy - hy),
-            Point::new(cx + hx, cy - hy),
-            Point::new(cx + hx, cy + hy),
-            Point::new(cx - hx, cy + hy),
-        ]
-    }
-
-    fn params() -> MergeMapParams {
+    fn params_of(gate: f64, min_overlap: f64, tolerance: f64) -> MergeMapParams {
         MergeMapParams {
-            gate: 1.0,
-            min_overlap: 0.5,
-            tolerance: 3.0,
+            gate,
+            min_overlap,
+            tolerance,
         }
     }
 
-    fn map() -> GlobalMap {
-        GlobalMap::new(MapConfig::default()).unwrap()
+    fn params() -> MergeMapParams {
+        params_of(1.0, 0.5, 3.0)
     }
 
     #[test]
@@ -261,24 +252,10 @@ mod tests {
             .unwrap();
         let leg: Vec<Point> = (0..=20).map(|i| Point::new(30.0, i as f64)).collect();
         let b = m.insert(MapClass::Boundary, &leg, 0).unwrap();
-        let out = m
-            .absorb(
-                &[a, b],
-                MergeMapParams {
-                    gate: 1.0,
-                    min_overlap: 0.04,
-                    tolerance: 0.2,
-                },
-            )
-            .unwrap();
+        let out = m.absorb(&[a, b], params_of(1.0, 0.04, 0.2)).unwrap();
         assert!(out.is_empty(), "{out:?}");
         assert_eq!(m.len(), 2);
-        let bad = MergeMapParams {
-            gate: f64::NAN,
-            min_overlap: 0.5,
-            tolerance: 3.0,
-        };
-        assert!(m.absorb(&[a], bad).is_err());
+        assert!(m.absorb(&[a], params_of(f64::NAN, 0.5, 3.0)).is_err());
         assert!(m.absorb(&[12345], params()).unwrap().is_empty());
     }
 }

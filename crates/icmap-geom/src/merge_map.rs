@@ -597,7 +597,7 @@ impl GlobalMap {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::store::MapConfig;
     use crate::types::MapClass;
@@ -607,7 +607,7 @@ mod tests {
         Point::new(x, y)
     }
 
-    fn map() -> GlobalMap {
+    pub(crate) fn map() -> GlobalMap {
         GlobalMap::new(MapConfig::default()).unwrap()
     }
 
@@ -622,7 +622,8 @@ mod tests {
             .collect()
     }
 
-    fn rect(cx: f64, cy: f64, hx: f64, hy: f64) -> Vec<Point> {
+    /// The axis-aligned rectangle of centre (cx, cy) and half sizes hx, hy, counter-clockwise.
+    pub(crate) fn rect(cx: f64, cy: f64, hx: f64, hy: f64) -> Vec<Point> {
         vec![
             p(cx - hx, cy - hy),
             p(cx + hx, cy - hy),
