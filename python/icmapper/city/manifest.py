@@ -75,17 +75,24 @@ def is_city_run(path: str | os.PathLike) -> bool:
     return (Path(path) / MANIFEST).is_file()
 
 
-def read_manifest(city: str | os.PathLike) -> CityManifest:
-    """The manifest of a city folder (ValueError naming the file when it is not one)."""
-    path = Path(city) / MANIFEST
+def read_versioned(path: Path, fmt: str, version: int, what: str) -> dict[str, Any]:
+    """The JSON object of a city folder's file ``path`` of format ``fmt`` and ``version``;
+    ValueError naming the file (and ``what`` it should be) otherwise."""
     try:
         raw = json.loads(path.read_text(encoding="utf-8"))
     except (OSError, ValueError) as exc:
-        raise ValueError(f"{path}: not a readable city manifest ({exc})") from None
-    if not isinstance(raw, dict) or raw.get("format") != FORMAT:
-        raise ValueError(f"{path}: not an icmapper city manifest")
-    if raw.get("version") != VERSION:
-        raise ValueError(f"{path}: version {raw.get('version')}, this build reads {VERSION}")
+        raise ValueError(f"{path}: not a readable {what} ({exc})") from None
+    if not isinstance(raw, dict) or raw.get("format") != fmt:
+        raise ValueError(f"{path}: not an icmapper {what}")
+    if raw.get("version") != version:
+        raise ValueError(f"{path}: version {raw.get('version')}, this build reads {version}")
+    return raw
+
+
+def read_manifest(city: str | os.PathLike) -> CityManifest:
+    """The manifest of a city folder (ValueError naming the file when it is not one)."""
+    path = Path(city) / MANIFEST
+    raw = read_versioned(path, FORMAT, VERSION, "city manifest")
     try:
         drives = [DriveEntry(**d) for d in raw.pop("drives")]
         return CityManifest(drives=drives, **raw)

@@ -35,7 +35,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from icmapper.atomic import atomic_path, write_text_atomic
-from icmapper.city.manifest import CITY_MAP, read_manifest
+from icmapper.city.manifest import CITY_MAP, read_manifest, read_versioned
 from icmapper.city.update import (
     Change,
     ChangeDetector,
@@ -78,16 +78,7 @@ def read_updates(city: str | os.PathLike) -> UpdateLog:
     path = Path(city) / UPDATES
     if not path.is_file():
         return UpdateLog()
-    try:
-        raw = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, ValueError) as exc:
-        raise ValueError(f"{path}: not a readable update log ({exc})") from None
-    if not isinstance(raw, dict) or raw.get("format") != UPDATES_FORMAT:
-        raise ValueError(f"{path}: not an icmapper city update log")
-    if raw.get("version") != UPDATES_VERSION:
-        raise ValueError(
-            f"{path}: version {raw.get('version')}, this build reads {UPDATES_VERSION}"
-        )
+    raw = read_versioned(path, UPDATES_FORMAT, UPDATES_VERSION, "city update log")
     try:
         entries = [UpdateEntry(**u) for u in raw["updates"]]
     except (TypeError, KeyError) as exc:

@@ -208,19 +208,28 @@ class _Builder:
             return True
         return False
 
+    def beside(
+        self, line: NDArray[np.float64], off: float, skip: int, divider_gap: float, kerb_gap: float
+    ) -> NDArray[np.float64] | None:
+        """``line`` shifted ``off`` metres to one side (sides tried in a seeded order): the first
+        that keeps CHANGE_SPACING from other changes, ``divider_gap`` from the other dividers
+        (``skip``: the divider's own id) and ``kerb_gap`` from the kerbs; None if neither."""
+        for sign in self.rnd.permutation([-1.0, 1.0]).tolist():
+            new = offset_curve(line, sign * off)  # (m, 2)
+            if not self.spaced(new):
+                continue
+            if _min_dist(new, self.of_class(MapClass.DIVIDER, skip=skip)) < divider_gap:
+                continue
+            if _min_dist(new, self.of_class(MapClass.BOUNDARY)) >= kerb_gap:
+                return new
+        return None
+
     def move_divider(self) -> bool:
         for k in self.candidates(MapClass.DIVIDER):
             inst = self.world.instances[k]
             d = float(self.rnd.uniform(0.5, 2.0))
-            for sign in self.rnd.permutation([-1.0, 1.0]).tolist():
-                new = offset_curve(_dense(inst.points), sign * d)  # (m, 2)
-                if not self.spaced(new):
-                    continue
-                others = self.of_class(MapClass.DIVIDER, skip=inst.id)
-                if _min_dist(new, others) < d + 0.5:
-                    continue
-                if _min_dist(new, self.of_class(MapClass.BOUNDARY)) < 0.5:
-                    continue
+            new = self.beside(_dense(inst.points), d, inst.id, d + 0.5, 0.5)
+            if new is not None:
                 self._replace(inst, new)
                 self.record(
                     TrueChange("moved", int(MapClass.DIVIDER), inst.id, new, False, inst.points)
@@ -239,14 +248,8 @@ class _Builder:
             if frac * length < 8.0:
                 continue
             piece = sub_curve(dense, s0, s0 + frac * length)
-            for sign in self.rnd.permutation([-1.0, 1.0]).tolist():
-                new = offset_curve(piece, sign * off)  # (m, 2)
-                if not self.spaced(new):
-                    continue
-                if _min_dist(new, self.of_class(MapClass.DIVIDER)) < 1.4:
-                    continue
-                if _min_dist(new, self.of_class(MapClass.BOUNDARY)) < 1.0:
-                    continue
+            new = self.beside(piece, off, -1, 1.4, 1.0)
+            if new is not None:
                 self._add(MapClass.DIVIDER, new, False, inst.style)
                 return True
         return False
