@@ -40,7 +40,13 @@ def plot_global_maps(
     allpts = [traj] + [p for _, p, _ in pred_items + gt_items]
     xy = np.concatenate(allpts)
     lo, hi = np.nanmin(xy, 0) - 10, np.nanmax(xy, 0) + 10  # NaN poses break the path
-    fig, axes = plt.subplots(1, 2, figsize=(12, 6.5), sharex=True, sharey=True)
+    w, h = hi - lo  # metres
+    if w > 1.3 * h:  # a wide map: the two panels one above the other, each as wide as the figure
+        fig, axes = plt.subplots(2, 1, figsize=(12, min(2 * 11 * h / w + 1.8, 16)),
+                                 sharex=True, sharey=True)  # fmt: skip
+    else:
+        fig, axes = plt.subplots(1, 2, figsize=(12, min(5.6 * h / w + 1.8, 16)),
+                                 sharex=True, sharey=True)  # fmt: skip
     for ax, items, name in (
         (axes[0], gt_items, "ground truth"),
         (axes[1], pred_items, "predicted"),
@@ -49,12 +55,13 @@ def plot_global_maps(
             p = np.vstack([pts, pts[:1]]) if closed else pts
             ax.plot(p[:, 0], p[:, 1], color=CLASS_COLOURS[cls], lw=1.3)
         ax.plot(traj[:, 0], traj[:, 1], color="0.6", lw=0.8, ls="--")
-        ax.set_title(f"{name} ({len(items)} instances)")
+        per_class = "/".join(str(sum(c == k for c, _, _ in items)) for k in range(3))
+        ax.set_title(f"{name}: {len(items)} instances ({per_class} crossings/dividers/boundaries)")
         ax.set_aspect("equal")
         ax.set_xlim(lo[0], hi[0])
         ax.set_ylim(lo[1], hi[1])
-        ax.set_xlabel("world x (m)")
-    axes[0].set_ylabel("world y (m)")
+        ax.set_ylabel("world y (m)")
+    axes[-1].set_xlabel("world x (m)")
     handles = [
         plt.Line2D([], [], color=c, label=n)
         for c, n in zip(CLASS_COLOURS, ("ped_crossing", "divider", "boundary"), strict=True)
