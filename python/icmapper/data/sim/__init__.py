@@ -1,5 +1,6 @@
 """Synthetic data: procedural cities (city), the ego driver (driver), the nuScenes-like camera rig
-(rig), the ground-plane ray-casting camera renderer (renderer) and sequences tying them together."""
+(rig), the ground-plane ray-casting camera renderer (renderer, composing rays, paint, texture,
+vehicles and sensor) and sequences tying them together."""
 
 from icmapper.data.sim.city import CITY_SEEDS, generate_city
 from icmapper.data.sim.driver import drive
