@@ -132,3 +132,20 @@ def test_map_nms_on_a_hand_made_map() -> None:
 def _three(seq: Sequence) -> Sequence:
     """The first three frames of ``seq``."""
     return replace(seq, timestamps=seq.timestamps[:3], poses=seq.poses[:3])
+
+
+def test_map_nms_removes_stubs_across_lanes_only() -> None:
+    from icmapper import GlobalMap
+    from icmapper.mapping.map_nms import stubs_across
+
+    gm = GlobalMap()
+    lane = gm.insert(1, line(0, 60, 0).astype(np.float64))
+    across = gm.insert(1, np.array([[20.0, -2.0], [20.0, 2.0]]))  # 4 m, at 90 degrees: a stub
+    slant = gm.insert(1, np.array([[30.0, -3.0], [37.15, 3.0]]))  # 9.3 m at 40 degrees: kept
+    long_ = gm.insert(1, np.array([[45.0, -6.0], [45.0, 6.0]]))  # 12 m across: kept
+    kerb = gm.insert(2, np.array([[10.0, -2.0], [10.0, 2.0]]))  # another class: kept
+    apart = gm.insert(1, np.array([[70.0, -2.0], [70.0, 2.0]]))  # crosses nothing: kept
+    assert stubs_across(gm, 10.0, 45.0) == [across]
+    assert stubs_across(gm, 0.0, 45.0) == []  # off
+    assert map_nms(gm, MapperConfig()) == 1
+    assert sorted(int(i) for i in gm.ids()) == sorted([lane, slant, long_, kerb, apart])

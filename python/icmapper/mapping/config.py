@@ -56,8 +56,12 @@ class MapperConfig:
     map_nms: bool = _f(
         False,
         "clean-up of the finished map, for every method: absorb every instance that lies on a "
-        "same-class neighbour (mapping.map_nms)",
+        "same-class neighbour, remove stubs across lanes (mapping.map_nms)",
     )
+    stub_length: float = _f(
+        10.0, "map_nms: metres under which a divider crossing a longer one is a stub (0: keep all)"
+    )
+    stub_angle: float = _f(45.0, "map_nms: degrees at which a stub crosses the longer divider")
     positional_scale: float = _f(
         1.0, "metres; positional affinity exp(-chamfer/scale) (no query features, Post-Track)"
     )
@@ -128,7 +132,8 @@ class MapperConfig:
         for name in ("min_hits", "cluster_min_samples"):
             if getattr(self, name) < 1:
                 raise ValueError(f"MapperConfig.{name} must be >= 1, got {getattr(self, name)}")
-        for name in ("max_age", "reid_distance", "fusion_margin", "smoothing", "merge_behind"):
+        for name in ("max_age", "reid_distance", "fusion_margin", "smoothing", "merge_behind",
+                     "stub_length"):  # fmt: skip
             if not getattr(self, name) >= 0:
                 raise ValueError(f"MapperConfig.{name} must be >= 0, got {getattr(self, name)}")
         if self.fused_merge not in FUSED_MERGES:
@@ -144,6 +149,8 @@ class MapperConfig:
             raise ValueError(
                 f"MapperConfig.city_min_overlap must be in (0, 1], got {self.city_min_overlap}"
             )
+        if not 0.0 <= self.stub_angle <= 90.0:
+            raise ValueError(f"MapperConfig.stub_angle must be in [0, 90], got {self.stub_angle}")
         if not 0.0 < self.absorb_overlap <= 1.0:
             raise ValueError(
                 f"MapperConfig.absorb_overlap must be in (0, 1], got {self.absorb_overlap}"
