@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from icmapper.data.sources import open_source
-from icmapper.data.types import RANGE_60x30, Frame, Sequence
+from icmapper.data.types import Frame, RANGE_60x30, Sequence
 from icmapper.mapping.config import MapperConfig
 from icmapper.mapping.map_nms import map_nms
 from icmapper.mapping.mapper import Mapper
