@@ -530,17 +530,17 @@ def test_fused_polylines_merge_by_rule(
     """A fused polyline (one that had a history) is spliced into its instance under
     ``fused_merge = "splice"`` and curve-fitted under "fit"; unfused ones are always fitted. Here
     every detection is marked fused, so the two rules build different maps."""
-    import icmapper.mapping.mapper as mapper_mod
+    import icmapper.mapping.merge as merge_mod  # the merge step calls splice_into
 
     seq = sim_val2[0]
     calls: list[int] = []
-    real = mapper_mod.splice_into
+    real = merge_mod.splice_into
 
     def counted(*args: object, **kw: object) -> None:
         calls.append(1)
         real(*args, **kw)
 
-    monkeypatch.setattr(mapper_mod, "splice_into", counted)
+    monkeypatch.setattr(merge_mod, "splice_into", counted)
     maps = {}
     for fused in (True, False):
         m = Mapper.with_oracle(seq, noise="low", seed=0, config=MapperConfig(fused_merge=rule))

@@ -26,12 +26,17 @@ Per frame (paper Fig. 2):
    same-class neighbour it lies on over most of its length become one (``GlobalMap.absorb``); the
    tracks of the absorbed instance map into the kept one. Pieces of one line that the tracker
    kept apart (a skeleton piece, a track found again beside its instance) stop doubling the map.
+
+This module is the pipeline and the state it carries; each step's logic has its own module:
+``associate`` (scores; the assignment is ``tracker``'s), ``reid``, ``fuse``, ``merge`` (with the
+rules in ``crossings``, ``passed``, ``splice``) and ``absorb``; the counters are in ``stats``, the
+variants in ``variants``, saving and resuming in ``state``.
 """
 
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -40,21 +45,24 @@ from numpy.typing import NDArray
 
 from icmapper.data.types import (
     Frame,
-    MapClass,
     PerceptionRange,
     RANGE_60x30,
     Sequence,
-    ego_to_world,
     pose_to_xy_yaw,
 )
+from icmapper.mapping import state
+from icmapper.mapping.absorb import absorb_touched
+from icmapper.mapping.associate import association_scores
 from icmapper.mapping.config import MapperConfig
 from icmapper.mapping.crossings import CrossingMerger
+from icmapper.mapping.fuse import fuse_with_history
+from icmapper.mapping.merge import merge_frame
 from icmapper.mapping.network_source import NetworkDetector
-from icmapper.mapping.passed import fresh_runs
 from icmapper.mapping.reid import reidentify
-from icmapper.mapping.splice import splice_into
-from icmapper.mapping.tracker import Tracker, positional_affinity
+from icmapper.mapping.stats import NETWORK_STAGES, STAGES, UNTRACKED_ID_BASE, MapperStats
+from icmapper.mapping.tracker import Tracker
 from icmapper.mapping.types import Detections, DetectionSource, StepResult
+from icmapper.mapping.variants import VARIANTS, Variant, network_settings
 
 if TYPE_CHECKING:
     import torch
@@ -63,72 +71,16 @@ if TYPE_CHECKING:
     from icmapper.models.association import AssociationHead
     from icmapper.models.fusion import FusionModule
 
-#: The stages of one step, in order (timed in ``MapperStats.seconds``).
-STAGES = ("detector", "association", "tracking", "sampling", "fusion", "merge")
-#: Stages that run neural networks (the rest is tracking and geometry).
-NETWORK_STAGES = ("detector", "association", "fusion")
-
-#: Ids of detections that are reported (score >= detect_threshold) but not tracked start here, so
-#: they never collide with track ids (the run format needs an id >= 0 for every prediction).
-UNTRACKED_ID_BASE = 1 << 40
-
-
-@dataclass(frozen=True)
-class Variant:
-    """A variant of the learned mapper (paper Table 4): temporal detector memory, learned
-    association, spatial fusion; one line of help; ``learned_only``: refused without the learned
-    detector (on oracle or file detections, without query features and fusion, "no-fusion" is
-    "full" and "single-frame" is "base"; "base" is allowed there too and equals "full")."""
-
-    temporal: bool
-    use_association: bool
-    use_fusion: bool
-    help: str
-    learned_only: bool = False
-
-
-#: The learned mapper's variants. Method names: "icmapper" for "full", "icmapper-<variant>".
-VARIANTS: dict[str, Variant] = {
-    "full": Variant(True, True, True, "IC-Mapper: learned association and spatial fusion"),
-    "no-fusion": Variant(True, True, False, "IC-Mapper without spatial fusion", True),
-    "base": Variant(
-        True, False, False, "the detector, positional tracking, no fusion (StreamMapNet-like)"
-    ),
-    "single-frame": Variant(
-        False, False, False, "like base without temporal memory (MapTR-like)", True
-    ),
-}
-
-
-def network_settings(
-    config: MapperConfig, fusion_margin: float, history_points: int
-) -> MapperConfig:
-    """``config`` with the fusion network's history settings; ValueError when ``config`` sets
-    other values than the defaults and the network's (the network was trained with its own)."""
-    default = MapperConfig()
-    for name, value in (("fusion_margin", fusion_margin), ("history_points", history_points)):
-        mine = getattr(config, name)
-        if mine != value and mine != getattr(default, name):
-            raise ValueError(
-                f"MapperConfig.{name} = {mine}, but the fusion network was trained with {value}"
-            )
-    return replace(config, fusion_margin=float(fusion_margin), history_points=int(history_points))
-
-
-@dataclass
-class MapperStats:
-    """Counters of one sequence (for logs and tests)."""
-
-    frames: int = 0
-    #: seconds spent per stage (STAGES)
-    seconds: dict[str, float] = field(default_factory=lambda: dict.fromkeys(STAGES, 0.0))
-    inserted: int = 0
-    merged: int = 0
-    reidentified: int = 0  # new tracks renamed to a global instance's id
-    aliased: int = 0  # new tracks mapped into an instance already matched this frame
-    absorbed: int = 0  # instances absorbed into a same-class neighbour (``_absorb``)
-    merge_failures: int = 0
-    failures: list[str] = field(default_factory=list)
+__all__ = [
+    "NETWORK_STAGES",
+    "STAGES",
+    "UNTRACKED_ID_BASE",
+    "VARIANTS",
+    "Mapper",
+    "MapperStats",
+    "Variant",
+    "network_settings",
+]
 
 
 class Mapper:
@@ -270,15 +222,11 @@ class Mapper:
 
     def save_state(self, path: str | Path) -> None:
         """Saves everything the next step depends on (``mapping.state.save_state``)."""
-        from icmapper.mapping.state import save_state
-
-        save_state(self, path)
+        state.save_state(self, path)
 
     def resume(self, path: str | Path) -> None:
         """Continues a saved run (``mapping.state.resume``)."""
-        from icmapper.mapping.state import resume
-
-        resume(self, path)
+        state.resume(self, path)
 
     def finish(self) -> GlobalMap:
         return self._map
@@ -333,38 +281,22 @@ class Mapper:
         return StepResult(frame.index, dets, all_ids, points, inserted, merged)
 
     def _associate(self, det: Detections, pose: NDArray[np.float64]) -> NDArray[np.int64]:
+        """Track ids (k,) of the detections: scores against the buffer (``mapping.associate``),
+        then the tracker's one-to-one assignment."""
         t0 = time.perf_counter()
-        trk_ids, trk_cls, trk_pts, trk_q = self.tracker.tracks_in_ego(pose)
-        k, t = len(det), len(trk_ids)
-        if k == 0 or t == 0:
-            scores = np.zeros((k, t), np.float64)
-        elif (
-            self.config.use_association
-            and self.association is not None
-            and det.queries is not None
-            and trk_q is not None
-        ):
-            import torch
-
-            unit = self.source.detector.to_unit  # type: ignore[attr-defined]
-            dev = self.device
-            with torch.no_grad():
-                s = self.association.scores(
-                    torch.as_tensor(det.queries, device=dev),
-                    unit(torch.as_tensor(det.points, device=dev)),
-                    torch.as_tensor(trk_q, device=dev),
-                    unit(torch.as_tensor(trk_pts, device=dev)),
-                )  # (k, t)
-            scores = s.cpu().numpy().astype(np.float64)
-        else:
-            scores = positional_affinity(
-                det.points,
-                det.classes,
-                trk_pts,
-                trk_cls,
-                scale=self.config.positional_scale,
-                reduce="min",  # instances grow and shrink at the range edge
-            )
+        _, trk_cls, trk_pts, trk_q = self.tracker.tracks_in_ego(pose)
+        head = self.association if self.config.use_association else None
+        detector: Any = getattr(self.source, "detector", None)
+        scores = association_scores(
+            det,
+            trk_cls,
+            trk_pts,
+            trk_q,
+            head=head,
+            to_unit=getattr(detector, "to_unit", None),
+            device=self.device,
+            positional_scale=self.config.positional_scale,
+        )  # (k, t)
         t1 = time.perf_counter()
         ids = self.tracker.assign(scores, det.classes, det.points, pose, det.queries)
         self.stats.seconds["association"] += t1 - t0
@@ -413,34 +345,13 @@ class Mapper:
         hist_pts: NDArray[np.float32],
     ) -> tuple[NDArray[np.float32], NDArray[np.bool_]]:
         """The fused points (m, P, 2) ego and which detections were fused (m,): those whose
-        instance has a history in the map (the others pass through)."""
-        none = np.zeros(len(det), bool)
+        instance has a history in the map (``mapping.fuse``; the others pass through)."""
         if not (self.config.use_fusion and self.fusion is not None) or len(det) == 0:
-            return det.points.copy(), none
+            return det.points.copy(), np.zeros(len(det), bool)
         targets = [self._alias.get(int(i), int(i)) for i in track_ids]
-        has = np.array([t in hist_row for t in targets], bool)  # (m,)
-        if not has.any():
-            return det.points.copy(), none
-        import torch
-
-        s = self.config.history_points
-        hist = np.zeros((len(det), s, 2), np.float32)  # (m, S, 2)
-        hist[has] = hist_pts[[hist_row[t] for t, h in zip(targets, has, strict=True) if h]]
-        dev = self.device
-        with torch.no_grad():
-            out = self.fusion(
-                torch.as_tensor(det.points, device=dev),
-                torch.as_tensor(det.classes, device=dev),
-                torch.as_tensor(hist, device=dev),
-                torch.as_tensor(has, device=dev),
-            )[-1]  # (m, P, 2) metres
-        return out.cpu().numpy().astype(np.float32), has
-
-    def _note_failure(self, frame_index: int, target: int, exc: BaseException) -> None:
-        """Counts a rejected insert or merge (degenerate geometry) and keeps the first 20."""
-        self.stats.merge_failures += 1
-        if len(self.stats.failures) < 20:
-            self.stats.failures.append(f"frame {frame_index}, id {target}: {exc}")
+        return fuse_with_history(
+            det, targets, hist_row, hist_pts, self.fusion, self.config.history_points, self.device
+        )
 
     def _merge(
         self,
@@ -451,89 +362,36 @@ class Mapper:
         pose: NDArray[np.float64],
         frame_index: int,
     ) -> tuple[list[int], list[int]]:
-        inserted: list[int] = []
-        merged: list[int] = []
-        # Inserts and crossing merges now (a later detection of this frame may merge into a new
-        # instance), polyline merges collected and run in one parallel merge_many call: the same
-        # map as merging in order.
-        # (track, target, world, the runs of world that merge: mapping.passed)
-        merge_items: list[tuple[int, int, NDArray[np.float64], list[NDArray[np.float64]]]] = []
-        for j, tid in enumerate(track_ids.tolist()):
-            world = ego_to_world(fused[j], pose)  # (P, 2)
-            target = self._alias.get(tid, tid)  # the global instance this track maps into
-            crossing = int(det.classes[j]) == MapClass.PED_CROSSING
-            spliced = bool(was_fused[j]) and self.config.fused_merge == "splice"
-            if target in self._map and crossing:  # by the crossing rule (mapping.crossings)
-                try:
-                    self.crossings.merge(self._map, target, world, fused[j], frame_index)
-                except ValueError as exc:
-                    self._note_failure(frame_index, target, exc)
-                    continue
-                merged.append(target)
-                self.tracker.set_points(tid, world)
-                continue
-            if target in self._map:
-                # not the stretch the car has passed (mapping.passed); the tracker keeps it all
-                stored = self._map.get(target)[1]
-                runs = fresh_runs(fused[j], world, stored, self.config.merge_behind)
-                if not spliced:
-                    merge_items.append((tid, target, world, runs))
-                    continue
-                try:  # the fusion already combined it with the history (mapping.splice)
-                    for run in runs:
-                        splice_into(self._map, target, run, self.config.splice_overlap, frame_index)
-                except ValueError as exc:
-                    self._note_failure(frame_index, target, exc)
-                    continue
-                merged.append(target)
-                self.tracker.set_points(tid, world)
-                continue
-            if self.tracker.track(tid).hits < self.config.min_hits:
-                continue  # tentative track: not in the map until confirmed
-            try:
-                self._map.insert_with_id(tid, int(det.classes[j]), world, frame=frame_index)
-            except ValueError as exc:  # degenerate geometry (e.g. a collapsed detection)
-                self._note_failure(frame_index, target, exc)
-                continue
-            if crossing:
-                self.crossings.inserted(tid, fused[j])
-            inserted.append(tid)
-            self.tracker.set_points(tid, world)
-        if merge_items:  # one item per run, the runs of a track in order
-            flat = [(target, run) for _, target, _, runs in merge_items for run in runs]
-            ids, runs_ = [t for t, _ in flat], [r for _, r in flat]
-            errors = iter(self._map.merge_many(ids, runs_, frame=frame_index) if flat else ())
-            for tid, target, world, runs in merge_items:
-                failed = [exc for exc in (next(errors) for _ in runs) if exc is not None]
-                if failed:
-                    self._note_failure(frame_index, target, failed[0])
-                    continue
-                merged.append(target)
-                self.tracker.set_points(tid, world)
+        """Merges the tracked detections into the map (``mapping.merge``); returns the ids
+        inserted and merged into."""
+        inserted, merged = merge_frame(
+            self._map,
+            self.crossings,
+            self.tracker,
+            self._alias,
+            self.config,
+            classes=det.classes,
+            track_ids=track_ids,
+            fused=fused,
+            was_fused=was_fused,
+            pose=pose,
+            frame_index=frame_index,
+            on_failure=self.stats.note_failure,
+        )
         self.stats.inserted += len(inserted)
         self.stats.merged += len(merged)
         return inserted, merged
 
     def _absorb(self, touched: list[int]) -> None:
         """Instances this step inserted or merged into absorb the same-class neighbours they lie
-        on, or are absorbed by them (``GlobalMap.absorb``); the tracks of an absorbed instance
-        map into the one that took it from now on."""
-        cfg = self.config
-        if not cfg.absorb or not touched:
-            return
-        pairs = self._map.absorb(
-            sorted(set(touched)), cfg.absorb_gate, cfg.absorb_overlap, cfg.absorb_tolerance
+        on, or are absorbed by them (``mapping.absorb``); aliases follow."""
+        self.stats.absorbed += absorb_touched(
+            self._map, self.crossings, self._alias, self.config, touched
         )
-        for gone, into in pairs:
-            for track, target in self._alias.items():
-                if target == gone:
-                    self._alias[track] = into
-            self._alias[gone] = into
-            self.crossings.absorbed(gone, into)
-        self.stats.absorbed += len(pairs)
 
 
 def _select(d: Detections, keep: NDArray[np.bool_]) -> Detections:
+    """The detections where ``keep`` (k,) is true."""
     return Detections(
         classes=d.classes[keep],
         scores=d.scores[keep],

@@ -74,7 +74,7 @@ def method(name: str) -> MethodInfo:
 
 
 def _register_variants() -> None:
-    from icmapper.mapping.mapper import VARIANTS
+    from icmapper.mapping.variants import VARIANTS
 
     for variant, v in VARIANTS.items():
         name = "icmapper" if variant == "full" else f"icmapper-{variant}"

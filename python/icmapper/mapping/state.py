@@ -25,10 +25,11 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
+from icmapper.mapping.stats import STAGES, MapperStats
 from icmapper.mapping.tracker import Track
 
-if TYPE_CHECKING:
-    from icmapper.mapping.mapper import Mapper, MapperStats
+if TYPE_CHECKING:  # the mapper imports this module; it is the one edge between them
+    from icmapper.mapping.mapper import Mapper
 
 #: Format version of the sidecar (``<map>.state.npz``).
 STATE_VERSION = 3  # 2: the crossing rule's view counts; 3: the absorbed counter
@@ -119,8 +120,6 @@ def resume(mapper: Mapper, path: str | Path) -> None:
 
 def _state_arrays(mapper: Mapper) -> dict[str, NDArray[Any]]:
     """The sidecar's arrays (all but ``map_sha256``)."""
-    from icmapper.mapping.mapper import STAGES
-
     tracks = mapper.tracker.tracks
     counts = np.array([len(t.points) for t in tracks], np.int64)  # (t,)
     pts = [np.asarray(t.points, np.float64).reshape(-1, 2) for t in tracks]
@@ -166,8 +165,6 @@ def _parse_state(
     mapper: Mapper, z: dict[str, NDArray[Any]], map_path: Path
 ) -> tuple[list[Track], dict[str, Any]]:
     """Validates the sidecar arrays and builds the tracker buffer and counters from them."""
-    from icmapper.mapping.mapper import STAGES, MapperStats
-
     # (_read_state refused another scalar version already; here a malformed one is refused)
     version = int(_int_array(z, "version", ndim=0))
     if version != STATE_VERSION:

@@ -1,0 +1,64 @@
+"""The association scores of one frame: detections against the tracking buffer (step 2 of the
+mapper's pipeline, before the tracker's one-to-one assignment).
+
+Learned scores ``H`` of the association head when both sides carry query features, positional
+affinity otherwise. Scores only: the assignment and the buffer are the tracker's
+(``mapping.tracker``). No I/O.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from icmapper.mapping.tracker import positional_affinity
+from icmapper.mapping.types import Detections
+
+if TYPE_CHECKING:
+    import torch
+
+    from icmapper.models.association import AssociationHead
+
+
+def association_scores(
+    det: Detections,
+    trk_cls: NDArray[np.int64],
+    trk_pts: NDArray[Any],
+    trk_q: NDArray[np.float32] | None,
+    *,
+    head: AssociationHead | None,
+    to_unit: Callable[[torch.Tensor], torch.Tensor] | None,
+    device: str | torch.device,
+    positional_scale: float,
+) -> NDArray[np.float64]:
+    """Scores (k, t) of the k detections against the t tracks (classes (t,), points (t, P, 2)
+    ego, queries (t, D) or None). ``head`` (None: positional affinity) scores the pairs when the
+    detections and the tracks carry queries; ``to_unit`` maps metres to the head's unit frame."""
+    k, t = len(det), len(trk_cls)
+    if k == 0 or t == 0:
+        return np.zeros((k, t), np.float64)
+    if head is not None and det.queries is not None and trk_q is not None:
+        import torch
+
+        if to_unit is None:
+            raise TypeError("learned association needs the detector's to_unit (metres -> unit)")
+
+        with torch.no_grad():
+            s = head.scores(
+                torch.as_tensor(det.queries, device=device),
+                to_unit(torch.as_tensor(det.points, device=device)),
+                torch.as_tensor(trk_q, device=device),
+                to_unit(torch.as_tensor(trk_pts, device=device)),
+            )  # (k, t)
+        return s.cpu().numpy().astype(np.float64)
+    return positional_affinity(
+        det.points,
+        det.classes,
+        trk_pts,
+        trk_cls,
+        scale=positional_scale,
+        reduce="min",  # instances grow and shrink at the range edge
+    )

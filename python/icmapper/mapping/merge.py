@@ -1,0 +1,114 @@
+"""The merge step of one frame (step 6 of the mapper's pipeline): every tracked detection goes
+into the global map by the rule for what it is.
+
+- a crossing whose instance is in the map: the crossing rule (``mapping.crossings``);
+- a polyline whose instance is in the map: the stretch the car has not passed yet
+  (``mapping.passed``), spliced in when fusion already combined it with the history
+  (``mapping.splice``, ``fused_merge = "splice"``), merged by curve fit otherwise (collected and
+  run in one parallel ``merge_many`` call: the same map as merging in order);
+- a new instance: inserted once its track has been seen in ``min_hits`` frames.
+
+Rejected geometry is reported to ``on_failure`` and skipped. The map, the crossing rule and the
+tracker's points change in place; the caller owns them. No I/O.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import TYPE_CHECKING
+
+import numpy as np
+from numpy.typing import NDArray
+
+from icmapper.data.types import MapClass, ego_to_world
+from icmapper.mapping.config import MapperConfig
+from icmapper.mapping.crossings import CrossingMerger
+from icmapper.mapping.passed import fresh_runs
+from icmapper.mapping.splice import splice_into
+from icmapper.mapping.tracker import Tracker
+
+if TYPE_CHECKING:
+    from icmapper._icmap import GlobalMap
+
+#: (frame index, global instance id, the error) of a rejected insert or merge.
+FailureSink = Callable[[int, int, BaseException], None]
+
+
+def merge_frame(
+    global_map: GlobalMap,
+    crossings: CrossingMerger,
+    tracker: Tracker,
+    alias: dict[int, int],
+    config: MapperConfig,
+    *,
+    classes: NDArray[np.int64],
+    track_ids: NDArray[np.int64],
+    fused: NDArray[np.float32],
+    was_fused: NDArray[np.bool_],
+    pose: NDArray[np.float64],
+    frame_index: int,
+    on_failure: FailureSink,
+) -> tuple[list[int], list[int]]:
+    """Merges the m tracked detections of one frame (classes (m,), track ids (m,), points
+    ``fused`` (m, P, 2) ego, ``was_fused`` (m,)) at ``pose`` (4, 4) ego->world; ``alias`` maps a
+    track id to the instance it merges into. Returns the instance ids inserted and merged into."""
+    inserted: list[int] = []
+    merged: list[int] = []
+    # Inserts and crossing merges now (a later detection of this frame may merge into a new
+    # instance), polyline merges collected and run in one parallel merge_many call: the same
+    # map as merging in order.
+    # (track, target, world, the runs of world that merge: mapping.passed)
+    merge_items: list[tuple[int, int, NDArray[np.float64], list[NDArray[np.float64]]]] = []
+    for j, tid in enumerate(track_ids.tolist()):
+        world = ego_to_world(fused[j], pose)  # (P, 2)
+        target = alias.get(tid, tid)  # the global instance this track maps into
+        crossing = int(classes[j]) == MapClass.PED_CROSSING
+        spliced = bool(was_fused[j]) and config.fused_merge == "splice"
+        if target in global_map and crossing:  # by the crossing rule (mapping.crossings)
+            try:
+                crossings.merge(global_map, target, world, fused[j], frame_index)
+            except ValueError as exc:
+                on_failure(frame_index, target, exc)
+                continue
+            merged.append(target)
+            tracker.set_points(tid, world)
+            continue
+        if target in global_map:
+            # not the stretch the car has passed (mapping.passed); the tracker keeps it all
+            stored = global_map.get(target)[1]
+            runs = fresh_runs(fused[j], world, stored, config.merge_behind)
+            if not spliced:
+                merge_items.append((tid, target, world, runs))
+                continue
+            try:  # the fusion already combined it with the history (mapping.splice)
+                for run in runs:
+                    splice_into(global_map, target, run, config.splice_overlap, frame_index)
+            except ValueError as exc:
+                on_failure(frame_index, target, exc)
+                continue
+            merged.append(target)
+            tracker.set_points(tid, world)
+            continue
+        if tracker.track(tid).hits < config.min_hits:
+            continue  # tentative track: not in the map until confirmed
+        try:
+            global_map.insert_with_id(tid, int(classes[j]), world, frame=frame_index)
+        except ValueError as exc:  # degenerate geometry (e.g. a collapsed detection)
+            on_failure(frame_index, target, exc)
+            continue
+        if crossing:
+            crossings.inserted(tid, fused[j])
+        inserted.append(tid)
+        tracker.set_points(tid, world)
+    if merge_items:  # one item per run, the runs of a track in order
+        flat = [(target, run) for _, target, _, runs in merge_items for run in runs]
+        ids, runs_ = [t for t, _ in flat], [r for _, r in flat]
+        errors = iter(global_map.merge_many(ids, runs_, frame=frame_index) if flat else ())
+        for tid, target, world, runs in merge_items:
+            failed = [exc for exc in (next(errors) for _ in runs) if exc is not None]
+            if failed:
+                on_failure(frame_index, target, failed[0])
+                continue
+            merged.append(target)
+            tracker.set_points(tid, world)
+    return inserted, merged
