@@ -29,6 +29,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from icmapper.atomic import write_text_atomic
+from icmapper.registry import Registry
 
 if TYPE_CHECKING:
     from icmapper._icmap import GlobalMap
@@ -47,14 +48,12 @@ class GeoFrame:
     to_lonlat: Callable[[NDArray[np.float64]], NDArray[np.float64]]
 
 
-GEO_FRAMES: dict[str, GeoFrame] = {}
+GEO_FRAMES: Registry[GeoFrame] = Registry("geo frame")
 
 
 def register_geo_frame(frame: GeoFrame) -> GeoFrame:
-    if frame.name in GEO_FRAMES:
-        raise ValueError(f"geo frame {frame.name!r} is registered twice")
-    GEO_FRAMES[frame.name] = frame
-    return frame
+    """Adds a frame to the registry (ValueError for a name registered twice)."""
+    return GEO_FRAMES.register(frame)
 
 
 def geo_frame(name: str) -> GeoFrame:

@@ -44,6 +44,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from icmapper.data.types import Sequence
+from icmapper.registry import Registry
 
 DEFAULT_SIM_COUNT = 4
 SIM_SPLITS = ("train", "val", "test")
@@ -128,15 +129,12 @@ class SourceKind:
 
 
 #: Registered source kinds by name (``register_source``), in registration order.
-SOURCE_KINDS: dict[str, SourceKind] = {}
+SOURCE_KINDS: Registry[SourceKind] = Registry("source kind")
 
 
 def register_source(kind: SourceKind) -> SourceKind:
     """Adds a source kind (a new dataset: one module with an opener + this one call)."""
-    if kind.name in SOURCE_KINDS:
-        raise ValueError(f"source kind {kind.name!r} is registered twice")
-    SOURCE_KINDS[kind.name] = kind
-    return kind
+    return SOURCE_KINDS.register(kind)
 
 
 def sources_help() -> str:

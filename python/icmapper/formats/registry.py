@@ -19,6 +19,7 @@ from pathlib import Path
 from typing import Any
 
 from icmapper.formats.types import PredictionFileError, PredictionSet
+from icmapper.registry import Registry
 
 
 @dataclass(frozen=True)
@@ -34,15 +35,12 @@ class PredictionFormat:
     write: Callable[[Path, PredictionSet], None] | None = None
 
 
-_FORMATS: dict[str, PredictionFormat] = {}
+_FORMATS: Registry[PredictionFormat] = Registry("prediction format")
 
 
 def register_format(fmt: PredictionFormat) -> PredictionFormat:
     """Adds a format to the registry (ValueError for a name registered twice)."""
-    if fmt.name in _FORMATS:
-        raise ValueError(f"prediction format {fmt.name!r} is registered twice")
-    _FORMATS[fmt.name] = fmt
-    return fmt
+    return _FORMATS.register(fmt)
 
 
 def formats() -> dict[str, PredictionFormat]:
@@ -52,10 +50,7 @@ def formats() -> dict[str, PredictionFormat]:
 
 def get_format(name: str) -> PredictionFormat:
     """The format registered as ``name`` (ValueError listing the known names)."""
-    known = formats()
-    if name not in known:
-        raise ValueError(f"unknown prediction format {name!r}; expected one of {', '.join(known)}")
-    return known[name]
+    return _FORMATS.lookup(name)
 
 
 def formats_help(writable: bool | None = None) -> str:

@@ -21,6 +21,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 from icmapper.data.types import PerceptionRange
+from icmapper.registry import Registry
 
 if TYPE_CHECKING:
     from icmapper.mapping.config import MapperConfig
@@ -49,15 +50,12 @@ class MethodInfo:
             raise ValueError(f"method {self.name!r}: give exactly one of variant and build")
 
 
-_METHODS: dict[str, MethodInfo] = {}
+_METHODS: Registry[MethodInfo] = Registry("method")
 
 
 def register_method(info: MethodInfo) -> MethodInfo:
     """Adds a method to the registry (ValueError for a name registered twice)."""
-    if info.name in _METHODS:
-        raise ValueError(f"method {info.name!r} is registered twice")
-    _METHODS[info.name] = info
-    return info
+    return _METHODS.register(info)
 
 
 def methods() -> dict[str, MethodInfo]:
@@ -67,10 +65,7 @@ def methods() -> dict[str, MethodInfo]:
 
 def method(name: str) -> MethodInfo:
     """The method registered as ``name`` (ValueError listing the known names)."""
-    known = methods()
-    if name not in known:
-        raise ValueError(f"unknown method {name!r}; expected one of {', '.join(known)}")
-    return known[name]
+    return _METHODS.lookup(name)
 
 
 def _register_variants() -> None:
