@@ -15,6 +15,7 @@ tracker's points change in place; the caller owns them. No I/O.
 from __future__ import annotations
 
 from collections.abc import Callable
+from functools import partial
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -59,19 +60,28 @@ def merge_frame(
     # map as merging in order.
     # (track, target, world, the runs of world that merge: mapping.passed)
     merge_items: list[tuple[int, int, NDArray[np.float64], list[NDArray[np.float64]]]] = []
+
+    def commit(
+        tid: int, target: int, world: NDArray[np.float64], change: Callable[[], object]
+    ) -> None:
+        """Runs ``change`` of instance ``target`` now: merged, the track's points follow; or
+        rejected (ValueError: degenerate geometry), reported."""
+        try:
+            change()
+        except ValueError as exc:
+            on_failure(frame_index, target, exc)
+            return
+        merged.append(target)
+        tracker.set_points(tid, world)
+
     for j, tid in enumerate(track_ids.tolist()):
         world = ego_to_world(fused[j], pose)  # (P, 2)
         target = alias.get(tid, tid)  # the global instance this track maps into
         crossing = int(classes[j]) == MapClass.PED_CROSSING
         spliced = bool(was_fused[j]) and config.fused_merge == "splice"
         if target in global_map and crossing:  # by the crossing rule (mapping.crossings)
-            try:
-                crossings.merge(global_map, target, world, fused[j], frame_index)
-            except ValueError as exc:
-                on_failure(frame_index, target, exc)
-                continue
-            merged.append(target)
-            tracker.set_points(tid, world)
+            change = partial(crossings.merge, global_map, target, world, fused[j], frame_index)
+            commit(tid, target, world, change)
             continue
         if target in global_map:
             # not the stretch the car has passed (mapping.passed); the tracker keeps it all
@@ -80,14 +90,11 @@ def merge_frame(
             if not spliced:
                 merge_items.append((tid, target, world, runs))
                 continue
-            try:  # the fusion already combined it with the history (mapping.splice)
-                for run in runs:
-                    splice_into(global_map, target, run, config.splice_overlap, frame_index)
-            except ValueError as exc:
-                on_failure(frame_index, target, exc)
-                continue
-            merged.append(target)
-            tracker.set_points(tid, world)
+            # the fusion already combined it with the history (mapping.splice)
+            change = partial(
+                _splice_runs, global_map, target, runs, config.splice_overlap, frame_index
+            )
+            commit(tid, target, world, change)
             continue
         if tracker.track(tid).hits < config.min_hits:
             continue  # tentative track: not in the map until confirmed
@@ -112,3 +119,15 @@ def merge_frame(
             merged.append(target)
             tracker.set_points(tid, world)
     return inserted, merged
+
+
+def _splice_runs(
+    global_map: GlobalMap,
+    target: int,
+    runs: list[NDArray[np.float64]],
+    overlap: float,
+    frame_index: int,
+) -> None:
+    """Splices the runs of one view into ``target`` in order (``mapping.splice``)."""
+    for run in runs:
+        splice_into(global_map, target, run, overlap, frame_index)
