@@ -2,7 +2,9 @@
 //!
 //! The geometry core of icmapper: the global vector-map store with its spatial index, patch
 //! clipping and even sampling, curve-fit merging and splicing of polylines, polygon union of
-//! crossings and Chamfer distances. Pure Rust: no Python in this crate (the binding lives in `icmap-py`).
+//! crossings and Chamfer distances; and the vectoriser that turns the detector's segmentation
+//! probabilities into instances ([`vectorise()`]). Pure Rust: no Python in this crate (the binding
+//! lives in `icmap-py`).
 //!
 //! Conventions (see the project's `docs/architecture.md`): metres and radians, world frame
 //! coordinates in `f64`, poses as `(x, y, yaw)` ego -> world, classes `0 ped_crossing` (closed
@@ -26,6 +28,7 @@ pub mod store;
 pub mod types;
 pub mod union;
 mod union_fast;
+pub mod vectorise;
 
 pub use chamfer::{chamfer_distance, chamfer_matrix};
 pub use clip::{clip_polygon, clip_polyline, sample_pieces};
@@ -38,3 +41,4 @@ pub use splice::splice_polyline;
 pub use store::{GlobalMap, Instance, MapConfig, PatchSample};
 pub use types::{validate_points, MapClass, Patch, Point, Pose2};
 pub use union::polygon_union;
+pub use vectorise::{vectorise, VectorInstances, VectoriseParams};
