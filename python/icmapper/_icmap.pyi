@@ -123,6 +123,46 @@ def chamfer_matrix(
     a: an (A, n, 2) array or a list of A arrays (n_i, 2); b likewise with B sets.
     """
 
+def vectorise(
+    prob: npt.NDArray[np.float32],
+    half_x: float,
+    half_y: float,
+    *,
+    upsample: int = 4,
+    threshold: float = 0.5,
+    min_length: float = 2.0,
+    min_area: float = 2.0,
+    shrink: float = 0.9,
+    rectangularity: float = 0.6,
+    corner_tolerance: float = 2.0,
+    hull_simplify: float = 0.5,
+    max_hole: float = 2.0,
+    simplify: float = 0.2,
+    through: float = 45.0,
+    spur: float = 4.0,
+    ridge_classes: Sequence[int] = (1,),
+    ridge_threshold: float = 0.3,
+    ridge_sigma: float = 0.6,
+    ridge_curvature: float = 0.22,
+    num_points: int = 20,
+    parallel: bool = True,
+) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.float32], npt.NDArray[np.float32]]:
+    """Map instances of one frame from the segmentation's class probabilities (the vectoriser).
+
+    prob: (K, X, Y) float32 class probabilities on the BEV grid, X cells along ego x over
+    ``[-half_x, half_x]``, Y along ego y (metres); class 0 (crossing) gives closed contours, the
+    others open polylines. The settings are ``icmapper.models.vectorise.VectoriseParams``' (the
+    Python ``vectorise`` passes them): bilinear upsampling, thresholds, the ridge mask of
+    ``ridge_classes``, skeleton branches joined through junctions (``through`` degrees) with spurs
+    under ``spur`` metres dropped, simplified and resampled to ``num_points``; crossing masks cut
+    into one part per crossing, outlined and shrunk. ``parallel``: the classes at once on the
+    engine's thread pool (same result). Returns ``(classes (N,) int64, scores (N,) float32 (mean
+    probability of the instance's cells), points (N, num_points, 2) float32 ego metres)``, classes
+    in index order. ValueError on an empty axis, NaN/inf probabilities or extents, bad settings
+    (as ``VectoriseParams``) or an upsampled grid beyond 2**26 cells; TypeError for another dtype
+    or number of axes. Runs with the GIL released.
+    """
+
 class InstanceInfo(TypedDict):
     id: int
     cls: int

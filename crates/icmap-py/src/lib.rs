@@ -12,6 +12,7 @@ mod convert;
 mod errors;
 mod functions;
 mod map;
+mod vectorise;
 
 #[pymodule]
 fn _icmap(m: &Bound<'_, PyModule>) -> PyResult<()> {
@@ -26,5 +27,6 @@ fn _icmap(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(functions::polygon_union, m)?)?;
     m.add_function(wrap_pyfunction!(functions::chamfer_distance, m)?)?;
     m.add_function(wrap_pyfunction!(functions::chamfer_matrix, m)?)?;
+    m.add_function(wrap_pyfunction!(vectorise::vectorise, m)?)?;
     Ok(())
 }

@@ -29,7 +29,8 @@ const WALK: [(isize, isize); 8] = [
 
 /// The cells of one skeleton branch (no junctions; any order) in path order, from an end: the
 /// lowest `(i, j)` cell with at most one neighbour (the lowest cell when there is none, a loop),
-/// then always the first unvisited neighbour in `WALK` order (edge neighbours first: up, left, right, down; then the diagonals).
+/// then always the first unvisited neighbour in `WALK` order (edge neighbours first: up, left,
+/// right, down; then the diagonals).
 pub fn order_branch(cells: &[Cell]) -> Vec<Cell> {
     if cells.len() <= 1 {
         return cells.to_vec();
