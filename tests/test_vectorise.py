@@ -377,8 +377,9 @@ def test_stage2_matches_segmentation_instances_to_the_truth() -> None:
 def test_order_branch_walks_from_the_lowest_end() -> None:
     """A branch's cells come back in path order from its lowest end, whatever order they are
     given in; edge neighbours are taken before diagonal ones; a closed loop starts at its lowest
-    cell."""
-    from icmapper.models.vectorise import _order_branch
+    cell. (The reference's walk; the engine's ``branches::order_branch`` pins the same cases in
+    its Rust unit test.)"""
+    from icmapper.testing.vectorise_reference import _order_branch
 
     path = np.array([[3, 1], [3, 2], [4, 3], [5, 3], [6, 4], [6, 5]])  # (L, 2) diagonal steps
     rng = np.random.default_rng(0)

@@ -11,41 +11,44 @@ from the masks instead (``model.instances = "segmentation"``):
   neighbouring lanes lie 2-3 BEV cells apart, and at the plain threshold their masks merge into one
   blob whose skeleton wanders between them; the valley between two lines curves upwards, so the
   ridge keeps them apart (validation AP_div 57.9 -> 66.7, checkpoint README);
-- a divider or boundary mask is thinned to its skeleton (scikit-image); the skeleton is cut at its
-  junctions into branches, each branch is ordered into a polyline. A line goes on through a
-  junction: the two branch ends there that continue each other most straightly (within
-  ``through`` degrees) are joined, and a branch shorter than ``spur`` that ends at a junction
-  without continuing is a spur and is dropped (lane lines and kerbs do not branch: cut at every
-  junction, one line became pieces and stubs; validation mAP 75.4 -> 77.9, sim:val:12,
+- a divider or boundary mask is thinned to its skeleton (Zhang-Suen, as scikit-image); the
+  skeleton is cut at its junctions into branches, each branch is ordered into a polyline. A line
+  goes on through a junction: the two branch ends there that continue each other most straightly
+  (within ``through`` degrees) are joined, and a branch shorter than ``spur`` that ends at a
+  junction without continuing is a spur and is dropped (lane lines and kerbs do not branch: cut
+  at every junction, one line became pieces and stubs; validation mAP 75.4 -> 77.9, sim:val:12,
   docs/mapping.md). Each line is simplified and resampled to P points; lines shorter than
   ``min_length`` metres are dropped;
 - each connected crossing mask becomes the convex hull of its cells (grown by half a cell,
   simplified by ``hull_simplify``; or their minimum rotated rectangle), shrunk by the target's
   line radius (the targets mark cells within that radius of the contour), resampled to P points
   along its closed contour; a mask of several touching crossings (around an intersection,
-  or meeting at a corner) is first cut into one part per crossing (``_crossing_parts``);
+  or meeting at a corner) is first cut into one part per crossing (the engine's
+  ``crossings::crossing_parts``);
 - an instance's score is the mean probability of its cells (its skeleton for lines).
 
-Everything here is numpy / scipy / scikit-image / shapely on one frame; no gradients.
+The work runs in the native engine (``icmapper._icmap.vectorise``, Rust ``icmap_geom::vectorise``,
+one operation per file there), with the GIL released and the classes of a frame in parallel; this
+module holds the settings, the result type and the argument checks. The former Python
+implementation (numpy / scipy / scikit-image / shapely) is ``icmapper.testing.vectorise_reference``,
+the oracle of the engine's tests (same instances on recorded masks of the shipped checkpoint) and
+of ``python -m benchmarks vectorise``; it is not part of the runtime.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterator
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
-
-if TYPE_CHECKING:
-    from shapely.geometry import LineString, Polygon
 
 #: Class index of crossings (closed contours); the other classes are open polylines.
 CROSSING = 0
 #: Class index of dividers (the default ``ridge_classes``).
 DIVIDER = 1
-_K8 = np.ones((3, 3), dtype=np.int64)
+#: Whether ``vectorise`` runs the classes of a frame at once on the engine's thread pool (the
+#: result is the same either way; ``python -m benchmarks vectorise`` measures both).
+PARALLEL_CLASSES = True
 
 
 @dataclass(frozen=True)
@@ -124,262 +127,6 @@ def resample_polyline(line: NDArray[np.float64], n: int, closed: bool) -> NDArra
     return np.stack([x, y], axis=-1).astype(np.float32)
 
 
-#: The 8 neighbour offsets in the order a path walk prefers them: edge neighbours before
-#: diagonal ones, then by coordinate (the walk takes the first unvisited one).
-_WALK = ((-1, 0), (0, -1), (0, 1), (1, 0), (-1, -1), (-1, 1), (1, -1), (1, 1))
-
-
-def _order_branch(cells: NDArray[np.int64]) -> NDArray[np.int64]:
-    """The cells (L, 2) of one skeleton branch (no junctions) in path order, from an end: the
-    lowest (i, j) cell with at most one neighbour (the lowest cell when there is none), then
-    always the first unvisited neighbour in ``_WALK`` order."""
-    lo = cells.min(axis=0) - 1
-    local = cells - lo  # (L, 2) inside a 1-cell border
-    grid = np.full(tuple(local.max(axis=0) + 2), -1, np.int64)
-    grid[local[:, 0], local[:, 1]] = np.arange(len(cells))
-    nb = np.stack([grid[local[:, 0] + di, local[:, 1] + dj] for di, dj in _WALK], 1)  # (L, 8)
-    ends = np.nonzero((nb >= 0).sum(1) <= 1)[0]
-    pool = ends if len(ends) else np.arange(len(cells))
-    cur = int(pool[np.lexsort((cells[pool, 1], cells[pool, 0]))[0]])
-    nbl = nb.tolist()
-    seen = [False] * len(cells)
-    seen[cur] = True
-    path = [cur]
-    while True:
-        cur = next((q for q in nbl[cur] if q >= 0 and not seen[q]), -1)
-        if cur < 0:
-            break
-        seen[cur] = True
-        path.append(cur)
-    return cells[np.asarray(path, np.int64)]
-
-
-def _fill(xy: NDArray[np.float64], half_cell: float) -> float:
-    """The fraction of the minimum rotated rectangle of cell centres ``xy`` (M, 2), grown by half a
-    cell, that the M cells cover."""
-    from shapely.geometry import MultiPoint
-
-    rect = MultiPoint(xy).minimum_rotated_rectangle.buffer(half_cell, join_style="mitre")
-    return float(len(xy) * (2 * half_cell) ** 2 / rect.area) if rect.area > 0 else 1.0
-
-
-def _skeleton_branches(
-    mask: NDArray[np.bool_],
-    metres: Callable[[NDArray[np.int64]], NDArray[np.float64]],
-    min_length: float,
-    through: float = 0.0,
-    spur: float = 0.0,
-) -> Iterator[tuple[NDArray[np.int64], LineString]]:
-    """The skeleton of ``mask`` (X, Y) (scikit-image) cut at its junctions: each branch's cells
-    (L, 2) in path order and its polyline in metres, for branches at least ``min_length`` long.
-
-    With ``through`` > 0 (degrees) a line goes on through a junction: at each junction the two
-    branch ends that continue each other most straightly (their courses within ``through`` of a
-    straight line) are joined, greedily, best pair first, into one branch (lane lines and kerbs
-    do not branch; a junction of their skeleton is where a line meets a spur or another line).
-    A branch left with an unjoined end at a junction that is shorter than ``spur`` metres is a
-    spur and is dropped."""
-    from scipy import ndimage
-    from shapely.geometry import LineString
-
-    skel = skeletonize_mask(mask)
-    degree = ndimage.convolve(skel.astype(np.int64), _K8, mode="constant") - 1
-    junctions = ndimage.binary_dilation(skel & (degree >= 3), _K8) & skel
-    labels, n = ndimage.label(skel & ~junctions, _K8)
-    paths = [_order_branch(np.argwhere(labels == c)) for c in range(1, n + 1)]
-    if through > 0 and n:
-        paths = _through_junctions(paths, junctions, metres, through, spur)
-    for path in paths:
-        if len(path) < 2:
-            continue
-        line = LineString(metres(path))
-        if line.length >= min_length:
-            yield path, line
-
-
-def skeletonize_mask(mask: NDArray[np.bool_]) -> NDArray[np.bool_]:
-    """The one-cell-wide skeleton of ``mask`` (X, Y) (scikit-image)."""
-    from skimage.morphology import skeletonize
-
-    return np.asarray(skeletonize(mask), bool)
-
-
-def _through_junctions(
-    paths: list[NDArray[np.int64]],
-    junctions: NDArray[np.bool_],
-    metres: Callable[[NDArray[np.int64]], NDArray[np.float64]],
-    through: float,
-    spur: float,
-) -> list[NDArray[np.int64]]:
-    """Joins branches ``paths`` (cells in order) through the junction cells ``junctions`` (X, Y)
-    and drops spurs (see ``_skeleton_branches``) -> the joined paths."""
-    from scipy import ndimage
-
-    jlab, _ = ndimage.label(junctions, _K8)
-    pad = np.pad(jlab, 1)  # (X + 2, Y + 2): neighbours of border cells read 0
-    ends: dict[int, list[tuple[int, int, NDArray[np.float64]]]] = {}  # junction -> (b, end, dir)
-    for b, path in enumerate(paths):
-        for e, (cell, inner) in enumerate(
-            ((path[0], path[min(4, len(path) - 1)]), (path[-1], path[max(len(path) - 5, 0)]))
-        ):
-            near = pad[cell[0] : cell[0] + 3, cell[1] : cell[1] + 3]
-            js = np.unique(near[near > 0])
-            if len(js) == 0 or (e == 1 and len(path) == 1):
-                continue
-            out = metres(cell[None])[0] - metres(inner[None])[0]  # (2,) towards the junction
-            norm = np.linalg.norm(out)
-            direction = out / norm if norm > 0 else np.zeros(2)
-            ends.setdefault(int(js[0]), []).append((b, e, direction))
-    cos_min = np.cos(np.radians(through))
-    link: dict[tuple[int, int], tuple[int, int]] = {}  # (branch, end) -> (branch, end)
-    loose: set[int] = set()  # branches with an unjoined end at a junction
-    for j in sorted(ends):
-        cands = sorted(
-            (float(-(a[2] @ b[2])), x, y)
-            for x, a in enumerate(ends[j])
-            for y, b in enumerate(ends[j])
-            if x < y and a[0] != b[0]
-        )
-        used: set[int] = set()
-        for straight, x, y in reversed(cands):  # straightest pair first
-            if straight < cos_min or x in used or y in used:
-                continue
-            used |= {x, y}
-            a, b = ends[j][x], ends[j][y]
-            link[a[0], a[1]], link[b[0], b[1]] = (b[0], b[1]), (a[0], a[1])
-        loose |= {ends[j][x][0] for x in range(len(ends[j])) if x not in used}
-    out: list[NDArray[np.int64]] = []
-    done = [False] * len(paths)
-    for start in range(len(paths)):
-        if done[start]:
-            continue
-        # walk to one end of the chain (a branch end without a link), or around a loop
-        b, e = start, 0
-        while (b, e) in link:
-            b, e = link[b, e]
-            e = 1 - e
-            if b == start:
-                break
-        chain, cur, end = [], b, 1 - e  # ``end``: the end of ``cur`` the walk leaves by
-        while not done[cur]:
-            done[cur] = True
-            p = paths[cur]
-            chain.append(p if end == 1 else p[::-1])
-            if (cur, end) not in link:
-                break
-            cur, end = link[cur, end]
-            end = 1 - end
-        joined = np.concatenate(chain)
-        if len(chain) == 1 and start in loose and spur > 0:
-            xy = metres(joined)  # (L, 2)
-            if float(np.linalg.norm(np.diff(xy, axis=0), axis=1).sum()) < spur:
-                continue  # a spur off a line
-        out.append(joined)
-    return out
-
-
-def _band_rectangle(xy: NDArray[np.float64], half_cell: float) -> Polygon:
-    """A rectangle fitted robustly to the cells ``xy`` (M, 2) of one part of a split crossing
-    mask: along its principal axis from the 1st to the 99th percentile, across it the width the
-    10th-90th percentiles span in a uniform band. The corner a part shares with its neighbour sits
-    in the tails and does not widen it, as it would widen the minimum rotated rectangle."""
-    from shapely.geometry import Polygon
-
-    centre = xy.mean(0)
-    _, _, vt = np.linalg.svd(xy - centre, full_matrices=False)
-    along, across = (xy - centre) @ vt[0], (xy - centre) @ vt[1]  # (M,), (M,)
-    a0, a1 = np.percentile(along, [1, 99]) + np.array([-half_cell, half_cell])
-    c10, c90 = np.percentile(across, [10, 90])
-    mid, w = 0.5 * (c10 + c90), 0.5 * (c90 - c10) / 0.8 + half_cell
-    corners = [(a0, mid - w), (a1, mid - w), (a1, mid + w), (a0, mid + w)]
-    return Polygon([centre + u * vt[0] + v * vt[1] for u, v in corners])
-
-
-def _crossing_parts(
-    comp: NDArray[np.bool_],
-    metres: Callable[[NDArray[np.int64]], NDArray[np.float64]],
-    p: VectoriseParams,
-    cell_area: float,
-) -> list[NDArray[np.int64]]:
-    """The cells (M_i, 2) of each crossing in one connected crossing mask ``comp`` (X, Y).
-
-    Crossings that touch (the arms of an intersection, often a ring around it) form one mask whose
-    rectangle would cover the whole intersection. Holes of inscribed radius up to ``max_hole`` are
-    filled first (the outline mask of one wide crossing). A mask around a wider hole is cut along
-    the sides of the hole's convex hull; a mask that fills less than ``rectangularity`` of its
-    rectangle along the straight runs of its skeleton (branches shorter than ``min_length``
-    dropped). Both are found by Douglas-Peucker with ``corner_tolerance``. Every cell goes to its
-    nearest side or run, then the two parts whose union is most rectangular are joined while it
-    stays above ``rectangularity``."""
-    from scipy import ndimage
-    from shapely.geometry import MultiPoint, Polygon
-
-    half = 0.5 * float(np.sqrt(cell_area))
-    # holes narrower than ``max_hole`` are the unpainted inside of one crossing's outline mask;
-    # a wider one is the middle of an intersection the crossings surround
-    holes = ndimage.binary_fill_holes(comp) & ~comp
-    hole_radius = ndimage.distance_transform_edt(holes) * 2 * half  # (X, Y) metres
-    labels, n = ndimage.label(holes, _K8)
-    radius = np.asarray(ndimage.maximum(hole_radius, labels, np.arange(1, n + 1)) if n else [])
-    wide = 1 + np.flatnonzero(radius > p.max_hole)  # labels of the wide holes
-    comp = comp | (holes & ~np.isin(labels, wide))
-    cells = np.argwhere(comp)  # (M, 2)
-    ring = len(wide) > 0
-    if p.rectangularity <= 0 or (not ring and _fill(metres(cells), half) >= p.rectangularity):
-        return [cells]
-    starts: list[NDArray[np.float64]] = []
-    ends: list[NDArray[np.float64]] = []
-
-    def add(v: NDArray[np.float64]) -> None:  # (V, 2) polyline -> its segments
-        starts.extend(v[:-1])
-        ends.extend(v[1:])
-
-    if ring:  # around an intersection: the crossings lie along the sides of its hole
-        for h in wide:
-            hull = MultiPoint(metres(np.argwhere(labels == h))).convex_hull
-            if isinstance(hull, Polygon):
-                add(np.asarray(hull.exterior.simplify(p.corner_tolerance).coords, np.float64))
-    else:  # along the straight runs of its skeleton
-        for _, line in _skeleton_branches(comp, metres, p.min_length):
-            add(np.asarray(line.simplify(p.corner_tolerance).coords, np.float64))
-    if len(starts) < 2:
-        return [cells]
-    a, b_ = np.asarray(starts), np.asarray(ends)  # (S, 2) segment ends
-    xy = metres(cells)  # (M, 2)
-    ab = b_ - a  # (S, 2)
-    t = np.einsum("msd,sd->ms", xy[:, None] - a[None], ab) / np.maximum((ab**2).sum(-1), 1e-12)
-    near = a[None] + np.clip(t, 0.0, 1.0)[..., None] * ab[None]  # (M, S, 2)
-    owner = np.linalg.norm(xy[:, None] - near, axis=-1).argmin(1)  # (M,)
-    parts = [cells[owner == s] for s in range(len(a)) if np.any(owner == s)]
-    while len(parts) > 1:
-        best, pair = p.rectangularity, None
-        for i in range(len(parts)):
-            for j in range(i + 1, len(parts)):
-                f = _fill(metres(np.vstack([parts[i], parts[j]])), half)
-                if f >= best:
-                    best, pair = f, (i, j)
-        if pair is None:
-            break
-        i, j = pair
-        parts[i] = np.vstack([parts[i], parts[j]])
-        del parts[j]
-    return [q for q in parts if len(q) * cell_area >= p.min_area]
-
-
-def _ridge_mask(
-    prob: NDArray[np.floating], p: VectoriseParams, cell: tuple[float, float]
-) -> NDArray[np.bool_]:
-    """Cells on a bright ridge of ``prob`` (X, Y), cells of ``cell`` metres: above
-    ``ridge_threshold`` where the smaller eigenvalue of the Hessian (Gaussian scale ``ridge_sigma``)
-    is below -``ridge_curvature``. -> (X, Y) bool."""
-    from skimage.feature import hessian_matrix, hessian_matrix_eigvals
-
-    px = float(np.sqrt(cell[0] * cell[1]))  # metres per cell
-    h = hessian_matrix(prob, sigma=p.ridge_sigma / px, order="rc", use_gaussian_derivatives=False)
-    low = hessian_matrix_eigvals(h)[1]  # (X, Y) the smaller eigenvalue, per cell^2
-    return (prob > p.ridge_threshold) & (low < -p.ridge_curvature * px * px)
-
-
 def vectorise(
     prob: NDArray[np.floating],
     half_x: float,
@@ -388,72 +135,35 @@ def vectorise(
 ) -> VectorInstances:
     """Instances of one frame from class probabilities ``prob`` (K, X, Y) in [0, 1] on the BEV
     grid (X cells along ego x over [-half_x, half_x], Y along ego y). Class ``CROSSING`` is closed.
-    ValueError on a wrong shape or non-finite probabilities."""
-    import torch
-    import torch.nn.functional as F
-    from scipy import ndimage
-    from shapely.geometry import MultiPoint, Polygon
+    The probabilities are taken as float32 (the network's dtype). ValueError on a wrong shape or
+    non-finite probabilities (the engine checks them)."""
+    from icmapper import _icmap
 
     p = params or VectoriseParams()
     prob = np.asarray(prob)
     if prob.ndim != 3 or min(prob.shape) < 1:
         raise ValueError(f"vectorise: prob must be (K, X, Y), got {prob.shape}")
-    if not np.all(np.isfinite(prob)):
-        raise ValueError("vectorise: probabilities contain NaN or inf")
-    if p.upsample > 1:
-        t = torch.from_numpy(np.ascontiguousarray(prob, dtype=np.float32))[None]
-        prob = F.interpolate(t, scale_factor=p.upsample, mode="bilinear", align_corners=False)[0]
-        prob = prob.numpy()
-    k_num, nx, ny = prob.shape
-    sx, sy = 2 * half_x / nx, 2 * half_y / ny
-
-    def metres(ij: NDArray[np.int64]) -> NDArray[np.float64]:
-        return np.stack([(ij[:, 0] + 0.5) * sx - half_x, (ij[:, 1] + 0.5) * sy - half_y], -1)
-
-    classes: list[int] = []
-    scores: list[float] = []
-    points: list[NDArray[np.float32]] = []
-    for k in range(k_num):
-        if k in p.ridge_classes:
-            mask = _ridge_mask(prob[k], p, (sx, sy))
-        else:
-            mask = prob[k] > p.threshold
-        if not mask.any():
-            continue
-        if k == CROSSING:
-            labels, n = ndimage.label(mask, _K8)
-            for c in range(1, n + 1):
-                comp = labels == c
-                if comp.sum() * sx * sy < p.min_area:
-                    continue
-                parts = _crossing_parts(comp, metres, p, sx * sy)
-                for cells in parts:
-                    xy = metres(cells)
-                    if len(parts) > 1:
-                        rect = _band_rectangle(xy, 0.5 * sx)
-                    elif p.hull_simplify > 0:
-                        rect = MultiPoint(xy).convex_hull.buffer(0.5 * sx, join_style="mitre")
-                        rect = rect.simplify(p.hull_simplify)
-                    else:
-                        rect = MultiPoint(xy).minimum_rotated_rectangle
-                    if p.shrink > 0 and isinstance(rect, Polygon):
-                        small = rect.buffer(-p.shrink, join_style="mitre")
-                        rect = small if isinstance(small, Polygon) and small.area > 0 else rect
-                    if not isinstance(rect, Polygon) or rect.area <= 0:
-                        continue
-                    ring = np.asarray(rect.exterior.coords, np.float64)[:-1]
-                    classes.append(k)
-                    scores.append(float(prob[k][cells[:, 0], cells[:, 1]].mean()))
-                    points.append(resample_polyline(ring, p.num_points, closed=True))
-            continue
-        for path, line in _skeleton_branches(mask, metres, p.min_length, p.through, p.spur):
-            simple = np.asarray(line.simplify(p.simplify).coords, np.float64)
-            classes.append(k)
-            scores.append(float(prob[k][path[:, 0], path[:, 1]].mean()))
-            points.append(resample_polyline(simple, p.num_points, closed=False))
-    n_out = len(classes)
-    return VectorInstances(
-        np.asarray(classes, np.int64),
-        np.asarray(scores, np.float32).reshape(n_out),
-        np.stack(points) if n_out else np.zeros((0, p.num_points, 2), np.float32),
-    )
+    classes, scores, points = _icmap.vectorise(
+        np.ascontiguousarray(prob, dtype=np.float32),  # (K, X, Y)
+        float(half_x),
+        float(half_y),
+        upsample=p.upsample,
+        threshold=p.threshold,
+        min_length=p.min_length,
+        min_area=p.min_area,
+        shrink=p.shrink,
+        rectangularity=p.rectangularity,
+        corner_tolerance=p.corner_tolerance,
+        hull_simplify=p.hull_simplify,
+        max_hole=p.max_hole,
+        simplify=p.simplify,
+        through=p.through,
+        spur=p.spur,
+        ridge_classes=list(p.ridge_classes),
+        ridge_threshold=p.ridge_threshold,
+        ridge_sigma=p.ridge_sigma,
+        ridge_curvature=p.ridge_curvature,
+        num_points=p.num_points,
+        parallel=PARALLEL_CLASSES,
+    )  # (N,) int64, (N,) float32, (N, P, 2) float32
+    return VectorInstances(classes, scores, points)

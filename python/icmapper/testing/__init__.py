@@ -5,6 +5,8 @@
   ``data.source = "synthetic:N"`` builds them (imported lazily by the training loop).
 - ``icmapper.testing.nuscenes_fixture``: ``write_nuscenes_fixture`` writes a tiny nuScenes-format
   dataset to disk.
+- ``icmapper.testing.vectorise_reference``: the former Python vectoriser (numpy / scipy /
+  scikit-image / shapely), the oracle of the engine's vectoriser in tests and benchmarks.
 - ``icmapper.testing.devkits``: the official devkits as test oracles (``require_devkit``);
   ``icmapper.testing.required``: when a missing test tool skips a test and when it fails it
   (``CI=true``, or its distribution installed but broken).
