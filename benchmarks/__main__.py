@@ -24,6 +24,10 @@ BENCHMARKS: dict[str, tuple[str, str]] = {
         "training steps/s and per-module inference latency (small config)",
     ),
     "mapper": ("benchmarks.mapper", "per-frame latency of the online mapper by stage"),
+    "vectorise": (
+        "benchmarks.vectorise",
+        "the vectoriser: Rust engine vs the former Python one, 1 thread and 2 threads at once",
+    ),
     "train-step": (
         "benchmarks.train_step",
         "training frames/s: the former training step vs the current one (one run)",

@@ -6,10 +6,12 @@ config when no checkpoint is given: the timings do not depend on the weights) an
 time of every stage and the share of the frame spent outside the networks.
 
 The mapper times the detector as one stage; with ``model.instances = "segmentation"`` (the
-shipped checkpoint) that stage includes the Python vectoriser that turns the masks into
-instances, which is not the network. This benchmark times the vectoriser on its own (it wraps the
-``vectorise`` the detector calls) and reports it as a stage of its own, outside the networks,
-taken out of the detector's time.
+shipped checkpoint) that stage includes the vectoriser that turns the masks into instances, which
+is not the network. This benchmark times the vectoriser on its own (it wraps the ``vectorise`` the
+detector calls: ``icmapper.models.vectorise.vectorise``, the engine's ``_icmap.vectorise``) and
+reports it as a stage of its own, outside the networks, taken out of the detector's time.
+``--vectoriser reference`` runs the former Python vectoriser
+(``icmapper.testing.vectorise_reference``) in its place, for the share it took.
 """
 
 from __future__ import annotations
@@ -29,6 +31,12 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--config", default="configs/small.toml", help="config without a checkpoint")
     p.add_argument("--source", default="sim:val:2")
     p.add_argument("--threads", type=int, default=1)
+    p.add_argument(
+        "--vectoriser",
+        choices=("engine", "reference"),
+        default="engine",
+        help="the runtime's (the engine's) or the former Python one",
+    )
     args = p.parse_args(argv)
 
     import torch
@@ -42,7 +50,7 @@ def main(argv: list[str] | None = None) -> int:
         ckpt = _fresh_checkpoint(args.config)
         print(f"(no checkpoint: timing a freshly initialised network of {args.config})")
     mapper = Mapper.from_checkpoint(ckpt)
-    vectoriser = _time_vectoriser()
+    vectoriser = _time_vectoriser(reference=args.vectoriser == "reference")
     from icmapper.models.network import checkpoint_settings
 
     seqs = open_source(args.source, image_size=checkpoint_settings(ckpt)[1])
@@ -66,7 +74,10 @@ def main(argv: list[str] | None = None) -> int:
     totals["detector"] -= vectoriser[0]
     stages = {"detector": totals["detector"], VECTORISER: vectoriser[0]}
     stages.update((k, totals[k]) for k in STAGES if k != "detector")
-    print(f"source {args.source}: {frames} frames, {args.threads} thread(s), checkpoint {ckpt}")
+    print(
+        f"source {args.source}: {frames} frames, {args.threads} thread(s), checkpoint {ckpt}, "
+        f"vectoriser {args.vectoriser}"
+    )
     print(f"{'stage':<12} {'ms/frame':>9} {'share':>7}")
     for k, v in stages.items():
         print(f"{k:<12} {1e3 * v / frames:9.2f} {v / step_total:7.1%}")
@@ -87,14 +98,19 @@ def main(argv: list[str] | None = None) -> int:
 VECTORISER = "vectorise"
 
 
-def _time_vectoriser() -> list[float]:
+def _time_vectoriser(reference: bool = False) -> list[float]:
     """Wraps ``icmapper.models.detector.vectorise`` (the masks -> instances step the detector
     calls in segmentation mode) with a timer; returns a one-element list that accumulates its
-    seconds. Nothing else changes: the wrapper returns what the vectoriser returns."""
+    seconds. Nothing else changes: the wrapper returns what the vectoriser returns (with
+    ``reference``, what the former Python vectoriser returns: the same instances)."""
     import icmapper.models.detector as detector
 
     spent = [0.0]
     inner = detector.vectorise
+    if reference:
+        from icmapper.testing.vectorise_reference import vectorise_reference
+
+        inner = vectorise_reference
 
     def timed(*args: Any, **kwargs: Any) -> Any:
         t0 = time.perf_counter()

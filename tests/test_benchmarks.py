@@ -95,7 +95,9 @@ def test_longrun_memory_trend_is_a_least_squares_slope() -> None:
     assert slope == pytest.approx(np.polyfit(frames, rss, 1)[0]) and err > 0
 
 
-@pytest.mark.parametrize("name", ["geometry", "render", "eval", "networks", "mapper", "viewer"])
+@pytest.mark.parametrize(
+    "name", ["geometry", "render", "eval", "networks", "mapper", "viewer", "vectorise"]
+)
 def test_every_benchmark_module_has_main(name: str) -> None:
     import importlib
 
@@ -109,3 +111,38 @@ def test_icmapper_bench_says_where_the_benchmarks_are(capsys: pytest.CaptureFixt
     assert main(["bench", "geometry"]) == 2
     err = capsys.readouterr().err
     assert "python -m benchmarks geometry" in err and "not part of the installed package" in err
+
+
+def test_vectorise_bench_runs_and_checks_agreement(capsys: pytest.CaptureFixture[str]) -> None:
+    """The vectoriser benchmark on a tiny workload: both mask sets, the engine checked against
+    the reference on every frame, the ratios printed (never asserted)."""
+    from benchmarks import vectorise as bench_vec
+
+    args = ["--frames", "3", "--gt-frames", "2", "--rounds", "1", "--thread-reps", "1"]
+    assert bench_vec.main(args) == 0
+    out = capsys.readouterr().out
+    assert "engine = reference on 3/3" in out and "engine = reference on 2/2" in out
+    assert out.count("two threads at once") == 2 and "x  (total time" in out
+
+
+def test_mapper_bench_times_either_vectoriser() -> None:
+    """The mapper benchmark's wrapper of the detector's ``vectorise`` returns what it wraps, the
+    engine's or (``--vectoriser reference``) the former Python one: the same instances."""
+    import icmapper.models.detector as detector
+
+    from benchmarks import mapper as bench_mapper
+    from benchmarks.vectorise import recorded_masks
+
+    prob = recorded_masks(1)[0][0]  # (3, 50, 25)
+    original = detector.vectorise
+    try:
+        got = []
+        for reference in (False, True):
+            spent = bench_mapper._time_vectoriser(reference=reference)
+            got.append(detector.vectorise(prob, 30.0, 15.0))
+            assert spent[0] > 0
+            detector.vectorise = original
+        np.testing.assert_array_equal(got[0].classes, got[1].classes)
+        np.testing.assert_array_equal(got[0].points, got[1].points)
+    finally:
+        detector.vectorise = original
