@@ -37,7 +37,7 @@ of ``python -m benchmarks vectorise``; it is not part of the runtime.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 
 import numpy as np
 from numpy.typing import NDArray
@@ -147,23 +147,7 @@ def vectorise(
         np.ascontiguousarray(prob, dtype=np.float32),  # (K, X, Y)
         float(half_x),
         float(half_y),
-        upsample=p.upsample,
-        threshold=p.threshold,
-        min_length=p.min_length,
-        min_area=p.min_area,
-        shrink=p.shrink,
-        rectangularity=p.rectangularity,
-        corner_tolerance=p.corner_tolerance,
-        hull_simplify=p.hull_simplify,
-        max_hole=p.max_hole,
-        simplify=p.simplify,
-        through=p.through,
-        spur=p.spur,
-        ridge_classes=list(p.ridge_classes),
-        ridge_threshold=p.ridge_threshold,
-        ridge_sigma=p.ridge_sigma,
-        ridge_curvature=p.ridge_curvature,
-        num_points=p.num_points,
+        **asdict(p),  # the settings by name (the engine checks them)
         parallel=PARALLEL_CLASSES,
     )  # (N,) int64, (N,) float32, (N, P, 2) float32
     return VectorInstances(classes, scores, points)

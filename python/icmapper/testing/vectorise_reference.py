@@ -297,9 +297,9 @@ def vectorise_reference(
     half_y: float,
     params: VectoriseParams | None = None,
 ) -> VectorInstances:
-    """Instances of one frame from class probabilities ``prob`` (K, X, Y) in [0, 1] on the BEV
-    grid (X cells along ego x over [-half_x, half_x], Y along ego y). Class ``CROSSING`` is closed.
-    ValueError on a wrong shape or non-finite probabilities."""
+    """What the former vectoriser returns for the arguments of
+    ``icmapper.models.vectorise.vectorise`` (probabilities (K, X, Y), the BEV's half extents, the
+    settings). ValueError on a wrong shape or non-finite probabilities."""
     import torch
     import torch.nn.functional as F
     from scipy import ndimage
