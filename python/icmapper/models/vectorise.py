@@ -47,8 +47,11 @@ CROSSING = 0
 #: Class index of dividers (the default ``ridge_classes``).
 DIVIDER = 1
 #: Whether ``vectorise`` runs the classes of a frame at once on the engine's thread pool (the
-#: result is the same either way; ``python -m benchmarks vectorise`` measures both).
-PARALLEL_CLASSES = True
+#: result is the same either way). Back to back it pays (1.4-1.6x, ``python -m benchmarks
+#: vectorise``); inside ``Mapper.step`` it does not: the pool's threads fall asleep during the
+#: network between frames and waking them costs more than the classes gain (sim:val:2 on 2
+#: cores: 0.88-1.02 ms/frame in parallel against 0.60-0.62 serial; BENCHMARKS.md).
+PARALLEL_CLASSES = False
 
 
 @dataclass(frozen=True)
