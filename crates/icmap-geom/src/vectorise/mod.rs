@@ -599,6 +599,10 @@ mod tests {
         assert_eq!(coarse.classes, vec![0]);
     }
 
+    /// No panic and consistent output on any mask and settings. A long run under a memory and a
+    /// time limit (30,000 cases each, about 30 s):
+    /// `(ulimit -v 4000000; PROPTEST_CASES=30000 timeout 900 cargo test -p icmap-geom --release
+    /// vectorise::tests::properties)`.
     mod properties {
         use super::super::*;
         use proptest::prelude::*;
