@@ -152,6 +152,10 @@ def test_union_any_input(rings: list[np.ndarray]) -> None:
     ),
 )
 @example(centre=(0.0, 0.0), squares=[(0, 1.5, 1), (1.5, 0, 1), (0, -1.5, 1), (-1.5, 0, 1)])
+@example(  # two rings of equal area, far from the origin (found by hypothesis)
+    centre=(46964.0, 770.0),
+    squares=[(0.0, 0.0, 1.0), (0.0, 0.0, 1.0), (6.0, 1.0, 1.0), (9.0, 0.0, 1.2919593992350635)],
+)
 def test_union_matches_shapely_ring_by_ring(centre: tuple, squares: list) -> None:
     """As test_geom_functions.test_polygon_union_matches_shapely: one outer ring per polygon of
     shapely's union, counter-clockwise, largest first, each covering its polygon's exterior
@@ -169,7 +173,9 @@ def test_union_matches_shapely_ring_by_ring(centre: tuple, squares: list) -> Non
     assert len(out) == len(ref_polys)
     got = [shapely.Polygon(r) for r in out]
     assert all(g.exterior.is_ccw for g in got)
-    assert [g.area for g in got] == sorted((g.area for g in got), reverse=True)
+    areas = [g.area for g in got]  # largest first; rings of equal area (to the engine's
+    # snapping grid, ~1e-9 relative) may come in either order
+    assert all(a >= b - 1e-7 * max(1.0, b) for a, b in zip(areas, areas[1:], strict=False))
     matched = set()
     for p in ref_polys:
         outer = shapely.Polygon(p.exterior)
