@@ -98,35 +98,6 @@ class CachedBev:
         )
 
 
-def _drop_across(items: list, angle: float) -> list:
-    """Leaves out dividers that cross a longer divider at more than ``angle`` degrees."""
-    from shapely.geometry import LineString
-
-    divs = [j for j, it in enumerate(items) if it[0] == 1]
-    lines = {j: LineString(items[j][1]) for j in divs}
-    drop = set()
-    for a in divs:
-        for b in divs:
-            if a == b or lines[a].length >= lines[b].length or not lines[a].crosses(lines[b]):
-                continue
-            if lines[a].length > 10.0:
-                continue
-            pt = lines[a].intersection(lines[b]).representative_point()
-            ta, tb = (_tangent(lines[k], pt) for k in (a, b))
-            if np.degrees(np.arccos(min(1.0, abs(float(ta @ tb))))) > angle:
-                drop.add(a)
-                break
-    return [it for j, it in enumerate(items) if j not in drop]
-
-
-def _tangent(line: Any, pt: Any) -> np.ndarray:
-    d = line.project(pt)
-    p0 = np.asarray(line.interpolate(max(d - 1.0, 0.0)).coords[0])
-    p1 = np.asarray(line.interpolate(min(d + 1.0, line.length)).coords[0])
-    t = p1 - p0
-    return t / max(float(np.linalg.norm(t)), 1e-12)
-
-
 def main(argv: list[str] | None = None) -> int:
     from icmapper.checkpoints import DEFAULT_CHECKPOINT
     from icmapper.data import gt as gt_mod
@@ -147,12 +118,6 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--cache", default="/tmp/icmapper-bev-cache")
     ap.add_argument("--json", default=None)
     ap.add_argument("--maps", default=None, help="folder for each method's .icmap per drive")
-    ap.add_argument(
-        "--drop-across",
-        type=float,
-        default=0.0,
-        help="(exploration) leave out dividers under 10 m crossing a longer one at more than this angle",
-    )
     ap.add_argument(
         "--min-obs", type=int, default=1, help="leave out map instances observed fewer times"
     )
@@ -200,8 +165,6 @@ def main(argv: list[str] | None = None) -> int:
                 if obs < a.min_obs:
                     continue
                 items.append((int(cls), np.asarray(pts), int(cls) == 0, float(obs or 1)))
-            if a.drop_across > 0:
-                items = _drop_across(items, a.drop_across)
             maps[n].append(items)
             if a.maps:
                 d = Path(a.maps) / n

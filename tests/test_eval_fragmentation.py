@@ -16,7 +16,8 @@ def line(x0: float, x1: float, y: float, n: int = 30) -> np.ndarray:
 
 
 def rect(cx: float, cy: float, hx: float, hy: float) -> np.ndarray:
-    return np.array([[cx - hx, cy - hy], [cx + hx, cy - hy], [cx + hx, cy + hy], [cx - hx, cy + hy]])
+    corners = [[cx - hx, cy - hy], [cx + hx, cy - hy], [cx + hx, cy + hy], [cx - hx, cy + hy]]
+    return np.array(corners)
 
 
 #: A road: two dividers, one kerb, one crossing.

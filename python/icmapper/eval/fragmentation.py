@@ -94,9 +94,7 @@ def _sequence_class(
 ) -> dict[str, list[Any]]:
     """Per ground-truth instance its pieces, per map instance whether it is a duplicate and
     whether it is stray, for one class of one sequence (``fragmentation`` pools them)."""
-    pieces = [
-        sum(int(p.near(g.samples, gate).sum() * STEP >= min_cover) for p in pred) for g in gt
-    ]
+    pieces = [sum(int(p.near(g.samples, gate).sum() * STEP >= min_cover) for p in pred) for g in gt]
     duplicate = []
     for i, a in enumerate(pred):
         dup = False
