@@ -24,6 +24,11 @@ BENCHMARKS: dict[str, tuple[str, str]] = {
         "training steps/s and per-module inference latency (small config)",
     ),
     "mapper": ("benchmarks.mapper", "per-frame latency of the online mapper by stage"),
+    "pipeline": (
+        "benchmarks.pipeline",
+        "the whole Mapper at paper scale (fresh weights, rasterised GT as the segmentation): "
+        "ms/frame by stage, frames/s",
+    ),
     "vectorise": (
         "benchmarks.vectorise",
         "the vectoriser: Rust engine vs the former Python one, 1 thread and 2 threads at once",

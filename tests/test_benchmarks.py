@@ -146,3 +146,13 @@ def test_mapper_bench_times_either_vectoriser() -> None:
         np.testing.assert_array_equal(got[0].points, got[1].points)
     finally:
         detector.vectorise = original
+
+
+def test_pipeline_bench_runs_one_frame(capsys: pytest.CaptureFixture[str]) -> None:
+    """The paper-scale pipeline benchmark runs one frame on the CPU and prints every stage."""
+    assert runner.main(["pipeline", "--frames", "1"]) == 0
+    out = capsys.readouterr().out
+    assert "rasterised ground truth" in out
+    for stage in ("detector", "vectorise", "association", "tracking", "fusion", "merge"):
+        assert any(line.split()[:1] == [stage] for line in out.splitlines()), stage
+    assert "frames/s" in out
