@@ -8,6 +8,7 @@ amp_cpu, ...). Unknown keys and bad values raise ``ValueError`` naming the key.
 from __future__ import annotations
 
 import dataclasses
+import os
 import sys
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -16,6 +17,25 @@ from typing import Any
 from icmapper.data.types import PerceptionRange
 from icmapper.models.config import ModelConfig
 from icmapper.settings import from_table, to_plain
+
+#: The most DataLoader workers ``data.num_workers = -1`` chooses (the value the paper and
+#: real-data configs set; each worker holds a copy of the dataset's state and its decode buffers).
+AUTO_WORKERS_MAX = 8
+
+
+def resolve_num_workers(num_workers: int, cores: int | None = None) -> int:
+    """The DataLoader worker count of ``data.num_workers``: itself when >= 0; for -1 the cores
+    (``cores``, default the CPUs this process may run on) less one for the training process, at
+    least 0 and at most ``AUTO_WORKERS_MAX``. Per process: each rank of a multi-GPU run on one
+    machine takes as many."""
+    if num_workers >= 0:
+        return num_workers
+    if num_workers != -1:
+        raise ValueError(f"num_workers must be >= 0 or -1, got {num_workers}")
+    if cores is None:
+        cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else None
+        cores = cores or os.cpu_count() or 1
+    return max(0, min(cores - 1, AUTO_WORKERS_MAX))
 
 
 @dataclass(frozen=True)
@@ -29,6 +49,8 @@ class DataConfig:
     clip_len: int = 3
     range: str = "60x30"
     image_size: tuple[int, int] = (64, 176)
+    #: DataLoader worker processes; -1 chooses them from the cores (``resolve_num_workers``: the
+    #: cores this process may use less one for the training loop, at most ``AUTO_WORKERS_MAX``).
     num_workers: int = 0
     #: On-disk image cache folder (icmapper.data.datasets.ImageCache), "" for none; one per size.
     cache_dir: str = ""
@@ -132,8 +154,8 @@ def _validate(cfg: TrainConfig) -> None:
             raise ValueError(f"config key {key} must be positive, got {v}")
     if len(d.image_size) != 2 or min(d.image_size) < 16:
         raise ValueError(f"data.image_size must be [H, W] >= 16, got {list(d.image_size)}")
-    if d.num_workers < 0:
-        raise ValueError("data.num_workers must be >= 0")
+    if d.num_workers < -1:
+        raise ValueError("data.num_workers must be >= 0, or -1 to choose from the cores")
     cfg.perception_range  # noqa: B018 - validates data.range
     for key, v in {
         "score_threshold": cfg.score_threshold,

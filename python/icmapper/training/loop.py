@@ -33,7 +33,7 @@ from icmapper.training.bevcache import (
     collate_bev_clips,
     encode_sequences,
 )
-from icmapper.training.config import TrainConfig, config_to_dict
+from icmapper.training.config import TrainConfig, config_to_dict, resolve_num_workers
 from icmapper.training.distributed import DistInfo, barrier, init_distributed, mean_over_ranks
 from icmapper.training.objectives import (
     SegAssociationObjective,
@@ -246,9 +246,8 @@ def _batches(
     while True:
         epoch, offset = divmod(step, spe)
         chunks: Sequence[list[int]] = epoch_batches(n, bs, epoch, cfg.seed, info)[offset:]
-        loader = DataLoader(
-            ds, batch_sampler=chunks, collate_fn=collate, num_workers=cfg.data.num_workers
-        )
+        workers = resolve_num_workers(cfg.data.num_workers)
+        loader = DataLoader(ds, batch_sampler=chunks, collate_fn=collate, num_workers=workers)
         for batch in loader:
             yield step, batch
             step += 1
