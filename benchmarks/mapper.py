@@ -70,22 +70,12 @@ def main(argv: list[str] | None = None) -> int:
         frames += mapper.stats.frames
     wall = time.perf_counter() - wall - render
     step_total = sum(totals.values())
-    # the vectoriser ran inside the mapper's "detector" stage: its own stage, not the network's
-    totals["detector"] -= vectoriser[0]
-    stages = {"detector": totals["detector"], VECTORISER: vectoriser[0]}
-    stages.update((k, totals[k]) for k in STAGES if k != "detector")
     print(
         f"source {args.source}: {frames} frames, {args.threads} thread(s), checkpoint {ckpt}, "
         f"vectoriser {args.vectoriser}"
     )
-    print(f"{'stage':<12} {'ms/frame':>9} {'share':>7}")
-    for k, v in stages.items():
-        print(f"{k:<12} {1e3 * v / frames:9.2f} {v / step_total:7.1%}")
-    outside = sum(v for k, v in stages.items() if k not in NETWORK_STAGES)
-    print(
-        f"{'total':<12} {1e3 * step_total / frames:9.2f}   "
-        f"(wall {1e3 * wall / frames:.2f} ms/frame)"
-    )
+    outside = print_stages(totals, vectoriser[0], frames)
+    print(f"{'':<12} (wall {1e3 * wall / frames:.2f} ms/frame)")
     print(
         f"outside the networks: {outside / step_total:.1%} of the frame, the vectoriser "
         f"included (target <= 10%)"
@@ -96,6 +86,20 @@ def main(argv: list[str] | None = None) -> int:
 
 #: The name of the vectoriser's stage in the printout.
 VECTORISER = "vectorise"
+
+
+def print_stages(totals: dict[str, float], vectorise_s: float, frames: int) -> float:
+    """Prints ms/frame and the share of each mapper stage, the vectoriser (``vectorise_s``
+    seconds, timed inside the "detector" stage) as its own stage, then the total; returns the
+    time outside the networks (seconds). totals: stage -> seconds over ``frames`` frames."""
+    step_total = sum(totals.values())
+    stages = {"detector": totals["detector"] - vectorise_s, VECTORISER: vectorise_s}
+    stages.update((k, totals[k]) for k in STAGES if k != "detector")
+    print(f"{'stage':<12} {'ms/frame':>9} {'share':>7}")
+    for k, v in stages.items():
+        print(f"{k:<12} {1e3 * v / frames:9.2f} {v / step_total:7.1%}")
+    print(f"{'total':<12} {1e3 * step_total / frames:9.2f}")
+    return sum(v for k, v in stages.items() if k not in NETWORK_STAGES)
 
 
 def _time_vectoriser(reference: bool = False) -> list[float]:

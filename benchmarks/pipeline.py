@@ -27,9 +27,9 @@ import time
 from typing import Any
 
 import torch
-from icmapper.mapping.mapper import NETWORK_STAGES, STAGES, Mapper
+from icmapper.mapping.mapper import STAGES, Mapper
 
-from benchmarks.mapper import VECTORISER, _fresh_checkpoint, _time_vectoriser
+from benchmarks.mapper import _fresh_checkpoint, _time_vectoriser, print_stages
 
 #: Logit magnitude of the ground-truth masks (sigmoid(20) = 1 - 2e-9).
 GT_LOGIT = 20.0
@@ -112,11 +112,7 @@ def main(argv: list[str] | None = None) -> int:
         raise SystemExit("--frames must be >= 1 (and the drive longer than one frame)")
     for k, v in mapper.stats.seconds.items():
         totals[k] += v
-    vec = vectoriser[0] - vec0
     step_total = sum(totals.values())
-    totals["detector"] -= vec
-    stages = {"detector": totals["detector"], VECTORISER: vec}
-    stages.update((k, totals[k]) for k in STAGES if k != "detector")
     m = det.cfg
     print(
         f"pipeline {args.config}: {m.num_cameras} cams x {image_size[0]}x{image_size[1]}, "
@@ -127,11 +123,7 @@ def main(argv: list[str] | None = None) -> int:
         f"source {args.source}: {frames} frames timed (after 1 warm-up), device {args.device}, "
         f"{torch.get_num_threads()} thread(s), {instances / frames:.1f} detections/frame"
     )
-    print(f"{'stage':<12} {'ms/frame':>9} {'share':>7}")
-    for k, v in stages.items():
-        print(f"{k:<12} {1e3 * v / frames:9.2f} {v / step_total:7.1%}")
-    outside = sum(v for k, v in stages.items() if k not in NETWORK_STAGES)
-    print(f"{'total':<12} {1e3 * step_total / frames:9.2f}")
+    outside = print_stages(totals, vectoriser[0] - vec0, frames)
     st = mapper.stats
     print(
         f"map: {st.inserted} instances inserted, {st.merged} merges, {st.absorbed} absorbed "
