@@ -12,15 +12,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from icmapper.eval.detection import (
-    CLASS_NAMES,
-    Matching,
-    ap_table,
-    match,
-    mean_ignore_nan,
-    score_order,
-    true_positives,
-)
+from icmapper.eval.detection import Matching, ap_summary
 from icmapper.eval.instances import Instances
 
 
@@ -49,18 +41,4 @@ def consistency_map(
     pred: Instances, gt: Instances, thresholds: tuple[float, ...], m: Matching | None = None
 ) -> dict:
     """C-AP per class and threshold, per class, and C-mAP (same keys as detection_ap, "C-")."""
-    m = match(pred, gt, max(thresholds)) if m is None else m
-    order = score_order(pred.scores)
-    per: dict[str, dict[str, float]] = {name: {} for name in CLASS_NAMES}
-    for thr in thresholds:
-        tp = consistent(pred, gt, m, true_positives(m, order, thr))
-        aps = ap_table(pred, gt, tp, order)
-        for name in CLASS_NAMES:
-            per[name][f"{thr:g}"] = aps[name]
-    ap_class = {name: mean_ignore_nan(list(per[name].values())) for name in CLASS_NAMES}
-    return {
-        "thresholds": [float(t) for t in thresholds],
-        "C-AP": per,
-        "C-AP_class": ap_class,
-        "C-mAP": mean_ignore_nan(list(ap_class.values())),
-    }
+    return ap_summary(pred, gt, thresholds, m, keep=consistent, prefix="C-")

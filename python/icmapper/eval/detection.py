@@ -10,6 +10,7 @@ precision envelope (VOC "area", as mmdet's ``average_precision(mode="area")``).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -176,17 +177,35 @@ def detection_ap(
     thresholds}, "mAP": mean over classes and thresholds}. Classes without ground truth give NaN
     and are left out of the means.
     """
+    return ap_summary(pred, gt, thresholds, m)
+
+
+def ap_summary(
+    pred: Instances,
+    gt: Instances,
+    thresholds: tuple[float, ...],
+    m: Matching | None = None,
+    keep: Callable[[Instances, Instances, Matching, NDArray[np.bool_]], NDArray[np.bool_]]
+    | None = None,
+    prefix: str = "",
+) -> dict:
+    """AP per class and threshold, per-class mean and mean, under the keys ``detection_ap``
+    names, each with ``prefix``; ``keep`` turns the TP flags (N,) of a threshold into those that
+    count (C-mAP's consistency rule), None keeps them all."""
     m = match(pred, gt, max(thresholds)) if m is None else m
     order = score_order(pred.scores)
-    per = {name: {} for name in CLASS_NAMES}
+    per: dict[str, dict[str, float]] = {name: {} for name in CLASS_NAMES}
     for thr in thresholds:
-        aps = ap_table(pred, gt, true_positives(m, order, thr), order)
+        tp = true_positives(m, order, thr)
+        if keep is not None:
+            tp = keep(pred, gt, m, tp)
+        aps = ap_table(pred, gt, tp, order)
         for name in CLASS_NAMES:
             per[name][f"{thr:g}"] = aps[name]
     ap_class = {name: mean_ignore_nan(list(per[name].values())) for name in CLASS_NAMES}
     return {
         "thresholds": [float(t) for t in thresholds],
-        "AP": per,
-        "AP_class": ap_class,
-        "mAP": mean_ignore_nan(list(ap_class.values())),
+        f"{prefix}AP": per,
+        f"{prefix}AP_class": ap_class,
+        f"{prefix}mAP": mean_ignore_nan(list(ap_class.values())),
     }

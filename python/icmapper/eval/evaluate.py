@@ -54,16 +54,7 @@ def _table(rows: list[tuple[int, int, Any, Any, Any, Any]], what: str) -> Instan
                 f"earlier frames have {n_points}"
             )
         n_points = pts.shape[1]
-        parts.append(
-            Instances(
-                np.full(k, s, dtype=np.int64),
-                np.full(k, t, dtype=np.int64),
-                np.asarray(classes, dtype=np.int64).reshape(k),
-                np.asarray(ids, dtype=np.int64).reshape(k),
-                np.asarray(scores, dtype=np.float64).reshape(k),
-                pts,
-            )
-        )
+        parts.append(Instances.of_frame(s, t, classes, ids, scores, pts))
     return Instances.concat(parts)
 
 

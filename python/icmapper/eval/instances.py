@@ -13,7 +13,7 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 
 @dataclass
@@ -59,6 +59,27 @@ class Instances:
         return Instances(z, z, z, z, np.zeros(0), np.zeros((0, n_points, 2)))
 
     @staticmethod
+    def of_frame(
+        seq: int,
+        frame: int,
+        classes: ArrayLike,
+        ids: ArrayLike,
+        scores: ArrayLike | None,
+        points: NDArray[np.float64],
+    ) -> Instances:
+        """The k rows of one frame: classes, ids (k,), scores (k,) or None (1, ground truth) and
+        points (k, n, 2) already shaped; k is the length of ``ids``."""
+        k = int(np.asarray(ids).shape[0])
+        return Instances(
+            np.full(k, seq, dtype=np.int64),
+            np.full(k, frame, dtype=np.int64),
+            np.asarray(classes, dtype=np.int64).reshape(k),
+            np.asarray(ids, dtype=np.int64).reshape(k),
+            np.ones(k) if scores is None else np.asarray(scores, dtype=np.float64).reshape(k),
+            points,
+        )
+
+    @staticmethod
     def concat(parts: Sequence[Instances]) -> Instances:
         """Rows of all parts, in order. Point counts must agree."""
         if not parts:
@@ -88,14 +109,5 @@ def from_frames(
             if k
             else np.zeros((0, n_points, 2))
         )
-        parts.append(
-            Instances(
-                np.full(k, seq, dtype=np.int64),
-                np.full(k, f, dtype=np.int64),
-                np.asarray(classes, dtype=np.int64).reshape(k),
-                np.asarray(ids, dtype=np.int64).reshape(k),
-                np.ones(k) if scores is None else np.asarray(scores, dtype=np.float64).reshape(k),
-                pts,
-            )
-        )
+        parts.append(Instances.of_frame(seq, f, classes, ids, scores, pts))
     return Instances.concat(parts) if parts else Instances.empty(n_points)
