@@ -5,12 +5,14 @@ everywhere and a mistake costs one clear line, not a traceback after minutes of 
 - **Output files** (``--out FILE``, ``--json``, ``--video``): the file's folder must exist (as
   for a shell redirection); nothing is created for it. **Output folders** (``--out DIR``,
   ``--city``) are created with their parents. Either way the user's path is named.
+- **Sizes** (``--image-size H W``, ``--thumb-size H W``): one option shape, ``add_size_option``.
 
 Nothing here reads data or writes files.
 """
 
 from __future__ import annotations
 
+import argparse
 import os
 from pathlib import Path
 
@@ -51,3 +53,12 @@ def output_folder(path: str | os.PathLike, flag: str) -> Path:
     if not os.access(ancestor, os.W_OK | os.X_OK):
         raise ValueError(f"{flag} {path}: folder {ancestor} is not writable")
     return out
+
+
+def add_size_option(
+    p: argparse.ArgumentParser, flag: str, default: tuple[int, int] | None, what: str | None
+) -> None:
+    """Adds an (H, W) pixel size option ``flag`` (two integers) to ``p``; its help is ``what``
+    followed by the default (none when ``default`` is None: the command derives it)."""
+    shown = what if what is None or default is None else f"{what} (default %(default)s)"
+    p.add_argument(flag, type=int, nargs=2, default=default, metavar=("H", "W"), help=shown)

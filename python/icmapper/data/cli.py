@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import argparse
 
+from icmapper.cliargs import add_size_option
 from icmapper.data.sources import SOURCE_KINDS
 from icmapper.data.types import PerceptionRange
 
@@ -29,7 +30,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--drive", type=int, default=0, help="drive seed")
     p.add_argument("--frame", type=int, default=10, help="frame index (0 to the length - 1)")
     p.add_argument("--range", default="60x30", help="BEV perception range, e.g. 60x30 or 100x50")
-    p.add_argument("--image-size", type=int, nargs=2, default=(128, 352), metavar=("H", "W"))
+    add_size_option(p, "--image-size", (128, 352), None)
     p.add_argument("--out", required=True, help="output PNG path (in an existing folder)")
     p.set_defaults(func=_preview)
     scenes.set_defaults(func=lambda args: (scenes.print_help(), 2)[1])

@@ -12,6 +12,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from icmapper.atomic import write_text_atomic
+from icmapper.cliargs import add_size_option
 from icmapper.data.sources import resolve_spec, source_tag
 
 if TYPE_CHECKING:
@@ -136,6 +137,25 @@ def range_of_detections(inp: Any) -> Any:
     return inp.perception_range()
 
 
+def _run_methods_of(
+    args: argparse.Namespace, methods: list[str], source: str, out: Path, config: MapperConfig
+) -> list[Path]:
+    """``run_methods`` with the detections, checkpoint, image size, seed, device and progress
+    that `map` and `compare` take from their common options."""
+    return run_methods(
+        methods,
+        source,
+        out,
+        args.detections,
+        args.checkpoint,
+        _image_size(args),
+        args.seed,
+        args.device,
+        not args.no_progress,
+        config=config,
+    )
+
+
 def cmd_map(args: argparse.Namespace) -> int:
     from icmapper.city.cli import workers_note
     from icmapper.cliargs import output_folder
@@ -153,18 +173,7 @@ def cmd_map(args: argparse.Namespace) -> int:
     if not args.out:
         raise ValueError("map needs --out (or --city for a city run)")
     output_folder(args.out, "--out")
-    run_methods(
-        [args.method],
-        args.source[0],
-        Path(args.out),
-        args.detections,
-        args.checkpoint,
-        _image_size(args),
-        args.seed,
-        args.device,
-        not args.no_progress,
-        config=mapper_config(args),
-    )
+    _run_methods_of(args, [args.method], args.source[0], Path(args.out), mapper_config(args))
     print(f"wrote {Path(args.out) / args.method}")
     return 0
 
@@ -185,18 +194,7 @@ def cmd_compare(args: argparse.Namespace) -> int:
     all_results = []
     for source in args.source:
         sub = out / source_tag(source)
-        dirs = run_methods(
-            methods,
-            source,
-            sub,
-            args.detections,
-            args.checkpoint,
-            _image_size(args),
-            args.seed,
-            args.device,
-            not args.no_progress,
-            config=config,
-        )
+        dirs = _run_methods_of(args, methods, source, sub, config)
         seqs = _open(source, _image_size(args), args.seed, render=False)
         results = []
         for d in dirs:
@@ -247,12 +245,11 @@ def _common(p: argparse.ArgumentParser, required_out: bool = True) -> None:
     p.add_argument(
         "--device", default="cpu", help="torch device of the learned networks (cpu, cuda, ...)"
     )
-    p.add_argument(
+    add_size_option(
+        p,
         "--image-size",
-        type=int,
-        nargs=2,
-        metavar=("H", "W"),
-        help="camera image size (default: the checkpoint's with --detections learned, else 64 176)",
+        None,
+        "camera image size (default: the checkpoint's with --detections learned, else 64 176)",
     )
     p.add_argument("--no-progress", action="store_true", help="no progress bar or lines")
     from icmapper.mapping.config import CLI_FLAGS, MapperConfig
@@ -285,13 +282,22 @@ def register(subparsers: Any) -> None:
         + "\n\nprediction file formats (--detections file:PATH[:FORMAT]):\n"
         + formats_help()
     )
-    p = subparsers.add_parser(
+
+    def add_parser(name: str, help: str, description: str) -> argparse.ArgumentParser:
+        """A sub-command that lists the sources, methods and formats after its options."""
+        return subparsers.add_parser(
+            name,
+            help=help,
+            formatter_class=argparse.RawDescriptionHelpFormatter,
+            epilog=epilog,
+            description=description,
+        )
+
+    p = add_parser(
         "map",
-        help="build global maps of a source's sequences with one method",
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-        epilog=epilog,
-        description="Runs one mapping method over sim:SPLIT[:N] | av2:PATH | nuscenes:PATH and "
-        "writes a run folder (docs/eval.md), the global maps (.icmap, .geojson) and PNGs.",
+        "build global maps of a source's sequences with one method",
+        "Runs one mapping method over sim:SPLIT[:N] | av2:PATH | nuscenes:PATH and writes a run "
+        "folder (docs/eval.md), the global maps (.icmap, .geojson) and PNGs.",
     )
     known = methods()
     p.add_argument(
@@ -313,13 +319,11 @@ def register(subparsers: Any) -> None:
     add_city_arguments(p)
     p.set_defaults(func=cmd_map)
 
-    c = subparsers.add_parser(
+    c = add_parser(
         "compare",
-        help="run IC-Mapper and the baselines on the same sequences and print the tables",
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-        epilog=epilog,
-        description="Runs every method on the same sequences of each --source, evaluates them "
-        "and prints detection, tracking and mapping tables (also OUT/report.md, results.json).",
+        "run IC-Mapper and the baselines on the same sequences and print the tables",
+        "Runs every method on the same sequences of each --source, evaluates them and prints "
+        "detection, tracking and mapping tables (also OUT/report.md, results.json).",
     )
     c.add_argument("--source", action="append", required=True, help="repeatable")
     c.add_argument("--methods", help=f"comma-separated subset of {','.join(known)}")

@@ -8,6 +8,7 @@ import argparse
 from pathlib import Path
 from typing import Any
 
+from icmapper.cliargs import add_size_option
 from icmapper.vis.replay import PICTURE_IMAGE_SIZE
 
 #: Camera thumbnail size (H, W) in the viewer.
@@ -135,14 +136,7 @@ def register(subparsers: Any) -> None:
         help="write a video (.mp4, or .gif) of the frames; its folder must exist",
     )
     p.add_argument("--fps", type=float, default=2.0, help="video frames per second (default 2)")
-    p.add_argument(
-        "--image-size",
-        type=int,
-        nargs=2,
-        default=PICTURE_IMAGE_SIZE,
-        metavar=("H", "W"),
-        help="camera image size in the picture (default %(default)s)",
-    )
+    add_size_option(p, "--image-size", PICTURE_IMAGE_SIZE, "camera image size in the picture")
     p.add_argument("--no-source", action="store_true", help="do not open the source: no "
                    "images or ground truth, predictions and map only")  # fmt: skip
     p.set_defaults(func=cmd_vis)
@@ -170,14 +164,7 @@ def register(subparsers: Any) -> None:
         "CITY_DIR/view-city.html, MAP.html)",
     )
     v.add_argument("--no-thumbnails", action="store_true", help="leave out the camera images")
-    v.add_argument(
-        "--thumb-size",
-        type=int,
-        nargs=2,
-        default=THUMB_SIZE,
-        metavar=("H", "W"),
-        help="camera thumbnail size (default %(default)s)",
-    )
+    add_size_option(v, "--thumb-size", THUMB_SIZE, "camera thumbnail size")
     v.add_argument("--no-source", action="store_true", help="do not open the source: no "
                    "images, ground truth or metrics")  # fmt: skip
     v.set_defaults(func=cmd_view)
