@@ -25,6 +25,7 @@ from pathlib import Path
 from typing import Any
 
 from icmapper.atomic import write_text_atomic
+from icmapper.versioned import check_versioned
 
 FORMAT = "icmapper-city"
 VERSION = 1
@@ -82,11 +83,7 @@ def read_versioned(path: Path, fmt: str, version: int, what: str) -> dict[str, A
         raw = json.loads(path.read_text(encoding="utf-8"))
     except (OSError, ValueError) as exc:
         raise ValueError(f"{path}: not a readable {what} ({exc})") from None
-    if not isinstance(raw, dict) or raw.get("format") != fmt:
-        raise ValueError(f"{path}: not an icmapper {what}")
-    if raw.get("version") != version:
-        raise ValueError(f"{path}: version {raw.get('version')}, this build reads {version}")
-    return raw
+    return check_versioned(raw, fmt, version, str(path), what)
 
 
 def read_manifest(city: str | os.PathLike) -> CityManifest:

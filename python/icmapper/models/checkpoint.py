@@ -13,6 +13,7 @@ from typing import Any
 import torch
 
 from icmapper.atomic import atomic_open
+from icmapper.versioned import check_versioned
 
 FORMAT = "icmapper-checkpoint"
 VERSION = 1
@@ -62,11 +63,7 @@ def load_checkpoint(path: str | Path, map_location: str | torch.device = "cpu") 
         elif not first:  # e.g. a bare EOFError of a truncated file
             first = f"{type(exc).__name__} (truncated or not a torch checkpoint)"
         raise ValueError(f"checkpoint {path} is unreadable: {first}") from None
-    if not isinstance(blob, dict) or blob.get("format") != FORMAT:
-        raise ValueError(f"{path} is not an icmapper checkpoint")
-    if blob.get("version") != VERSION:
-        raise ValueError(f"checkpoint {path} has version {blob.get('version')}, expected {VERSION}")
-    return blob
+    return check_versioned(blob, FORMAT, VERSION, f"checkpoint {path}", "checkpoint")
 
 
 def export_checkpoint(src: str | Path, dst: str | Path) -> None:
