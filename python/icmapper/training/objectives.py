@@ -42,6 +42,12 @@ def prev_to_cur(poses: torch.Tensor, t: int) -> torch.Tensor:
     return (torch.linalg.inv(poses[:, t]) @ poses[:, t - 1]).float()
 
 
+def frame_cameras(batch: dict, t: int) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """Frame t of a clip batch as the detector takes it: images (B, N, 3, H, W), intrinsics
+    (B, N, 3, 3), cam_to_ego (B, N, 4, 4)."""
+    return batch["images"][:, t], batch["intrinsics"][:, t], batch["cam_to_ego"][:, t]
+
+
 def prepare_gt(gt: dict, detector: MapDetector, device: torch.device) -> dict:
     """A frame's GT dict on ``device`` with 'points01' ([0, 1] of the range) added."""
     pts = gt["points"].to(device=device, dtype=torch.float32)  # (G, P, 2)
@@ -157,13 +163,7 @@ class Stage1Objective(nn.Module):
             if cached:
                 out, nxt = self.detector.decode(batch["bev"][:, t], state, motion)
             else:
-                out, nxt = self.detector(
-                    batch["images"][:, t],
-                    batch["intrinsics"][:, t],
-                    batch["cam_to_ego"][:, t],
-                    state,
-                    motion,
-                )
+                out, nxt = self.detector(*frame_cameras(batch, t), state, motion)
             gts = [prepare_gt(g[t], self.detector, dev) for g in batch["gt"]]
             det_loss, matches = self.criterion(out.logits, out.points, gts)
             l_det = l_det + det_loss
@@ -204,10 +204,7 @@ class Stage1Objective(nn.Module):
         l_seg = batch["images"].new_zeros((), dtype=torch.float32)
         for t in range(t_len):
             motion = prev_to_cur(batch["poses"], t) if t > 0 else None
-            bev, nxt = det.encode_stream(
-                batch["images"][:, t], batch["intrinsics"][:, t], batch["cam_to_ego"][:, t],
-                state, motion,
-            )  # fmt: skip
+            bev, nxt = det.encode_stream(*frame_cameras(batch, t), state, motion)
             logits = seg_head(bev)  # (B, K, X, Y)
             gts = [prepare_gt(g[t], det, dev) for g in batch["gt"]]
             l_seg = l_seg + seg_loss(logits, self.seg_targets(gts, logits))
@@ -334,13 +331,7 @@ class Stage2Objective(nn.Module):
         outs, state = [], None
         for t in range(batch["images"].shape[1]):
             motion = prev_to_cur(batch["poses"], t) if t > 0 else None
-            out, state = self.detector(
-                batch["images"][:, t],
-                batch["intrinsics"][:, t],
-                batch["cam_to_ego"][:, t],
-                state,
-                motion,
-            )
+            out, state = self.detector(*frame_cameras(batch, t), state, motion)
             outs.append(out)
         return outs
 

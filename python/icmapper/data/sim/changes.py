@@ -161,8 +161,8 @@ class _Builder:
         self.used: set[int] = set()  # world instance ids already changed
         self.next_id = max((m.id for m in world.instances), default=0) + 1
 
-    def candidates(self, cls: MapClass, min_frames: int = 3) -> list[int]:
-        """Indices of visible, unchanged instances of ``cls`` in a seeded random order."""
+    def candidates(self, cls: MapClass, min_frames: int = 3) -> list[MapInstance]:
+        """The visible, unchanged world instances of ``cls`` in a seeded random order."""
         ks = [
             k
             for k, n in sorted(self.visible.items())
@@ -170,7 +170,7 @@ class _Builder:
             and self.world.instances[k].cls == cls
             and self.world.instances[k].id not in self.used
         ]
-        return [ks[int(i)] for i in self.rnd.permutation(len(ks))]
+        return [self.world.instances[ks[int(i)]] for i in self.rnd.permutation(len(ks))]
 
     def seen_run(self, points: NDArray[np.float64]) -> NDArray[np.float64]:
         """The longest stretch (k, 2) of the polyline ``points`` (densified to 1 m) whose points
@@ -199,8 +199,7 @@ class _Builder:
         self.used.add(change.instance)
 
     def remove(self, cls: MapClass) -> bool:
-        for k in self.candidates(cls):
-            inst = self.world.instances[k]
+        for inst in self.candidates(cls):
             if not self.spaced(inst.points):
                 continue
             self.instances = [m for m in self.instances if m.id != inst.id]
@@ -225,8 +224,7 @@ class _Builder:
         return None
 
     def move_divider(self) -> bool:
-        for k in self.candidates(MapClass.DIVIDER):
-            inst = self.world.instances[k]
+        for inst in self.candidates(MapClass.DIVIDER):
             d = float(self.rnd.uniform(0.5, 2.0))
             new = self.beside(_dense(inst.points), d, inst.id, d + 0.5, 0.5)
             if new is not None:
@@ -238,8 +236,7 @@ class _Builder:
         return False
 
     def add_divider(self) -> bool:
-        for k in self.candidates(MapClass.DIVIDER):
-            inst = self.world.instances[k]
+        for inst in self.candidates(MapClass.DIVIDER):
             off = float(self.rnd.uniform(1.5, 1.9))
             dense = self.seen_run(inst.points)
             length = float(arc_length(dense)[-1]) if len(dense) > 1 else 0.0
@@ -257,8 +254,7 @@ class _Builder:
     def add_crossing(self) -> bool:
         kerbs = MultiLineString([LineString(p) for p in self.of_class(MapClass.BOUNDARY)])
         crossings = self.of_class(MapClass.PED_CROSSING)
-        for k in self.candidates(MapClass.DIVIDER):
-            inst = self.world.instances[k]
+        for inst in self.candidates(MapClass.DIVIDER):
             dense = self.seen_run(inst.points)
             if len(dense) < 2 or float(arc_length(dense)[-1]) < 16.0:
                 continue
@@ -285,8 +281,7 @@ class _Builder:
 
     def move_kerb(self) -> bool:
         drivable = shapely.union_all([Polygon(p).buffer(0) for p in self.drivable])
-        for k in self.candidates(MapClass.BOUNDARY):
-            inst = self.world.instances[k]
+        for inst in self.candidates(MapClass.BOUNDARY):
             dense = _dense(inst.points, 0.5)  # (m, 2)
             s = arc_length(dense)  # (m,)
             span, ramp = float(self.rnd.uniform(15.0, 30.0)), 5.0
