@@ -113,24 +113,8 @@ def detections_for(
 
 
 # ---------------------------------------------------------------------------------------------
-# the plain-Python reference (shapely + scipy)
-
-
-def _patch_polygon(pose: np.ndarray, hx: float, hy: float) -> Any:
-    import shapely
-
-    x, y, yaw = pose
-    c, s = math.cos(yaw), math.sin(yaw)
-    corners = [(-hx, -hy), (hx, -hy), (hx, hy), (-hx, hy)]
-    return shapely.Polygon([(x + c * u - s * v, y + s * u + c * v) for u, v in corners])
-
-
-def _to_ego(pts: np.ndarray, pose: np.ndarray) -> np.ndarray:
-    """World (..., 2) -> ego (..., 2)."""
-    x, y, yaw = pose
-    c, s = math.cos(yaw), math.sin(yaw)
-    dx, dy = pts[..., 0] - x, pts[..., 1] - y
-    return np.stack([c * dx + s * dy, -s * dx + c * dy], axis=-1)
+# the plain-Python reference (shapely + scipy; the patch and the ego frame:
+# icmapper.testing.geom_reference)
 
 
 def _resample_np(pts: np.ndarray, spacing: float, closed: bool) -> np.ndarray:
@@ -229,8 +213,9 @@ class ShapelyMap:
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Same outputs as ``GlobalMap.sample_patch(pose, RANGE, MARGIN, N_POINTS)``."""
         import shapely
+        from icmapper.testing.geom_reference import patch_polygon, to_ego
 
-        patch = _patch_polygon(pose, RANGE[0] + MARGIN, RANGE[1] + MARGIN)
+        patch = patch_polygon(pose, RANGE[0] + MARGIN, RANGE[1] + MARGIN)
         slots = self.candidates(patch)
         clipped = shapely.intersection(np.array([self.geom[k] for k in slots]), patch)
         rows: list[tuple[int, np.ndarray, np.ndarray]] = []  # (slot, world (20, 2), mask (20,))
@@ -264,7 +249,7 @@ class ShapelyMap:
         pts = np.zeros((len(rows), N_POINTS, 2), dtype=np.float32)  # (k, 20, 2)
         mask = np.zeros((len(rows), N_POINTS), dtype=bool)  # (k, 20)
         for r, (_, world, m) in enumerate(rows):
-            pts[r], mask[r] = _to_ego(world, pose), m
+            pts[r], mask[r] = to_ego(world, pose), m
         return ids, cls, pts, mask
 
     def _fit(self, pts: np.ndarray) -> np.ndarray:

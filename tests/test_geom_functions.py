@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 import shapely
 from icmapper import geom
+from icmapper.testing.geom_reference import patch_polygon, to_ego
 from scipy.interpolate import splev, splprep
 from shapely.geometry import LineString, Polygon
 
@@ -23,22 +24,6 @@ def arc_interp(points: np.ndarray, n: int, closed: bool) -> np.ndarray:
     s = np.concatenate([[0.0], np.cumsum(seg)])  # (m',)
     t = np.linspace(0.0, s[-1], n, endpoint=not closed)  # (n,)
     return np.stack([np.interp(t, s, pts[:, 0]), np.interp(t, s, pts[:, 1])], axis=1)
-
-
-def patch_polygon(pose: tuple[float, float, float], hx: float, hy: float) -> Polygon:
-    """The oriented patch as a shapely polygon (world frame)."""
-    x, y, yaw = pose
-    c, s = math.cos(yaw), math.sin(yaw)
-    corners = [(-hx, -hy), (hx, -hy), (hx, hy), (-hx, hy)]
-    return Polygon([(x + c * u - s * v, y + s * u + c * v) for u, v in corners])
-
-
-def to_ego(points: np.ndarray, pose: tuple[float, float, float]) -> np.ndarray:
-    """World (n, 2) -> ego frame of pose (n, 2)."""
-    x, y, yaw = pose
-    c, s = math.cos(yaw), math.sin(yaw)
-    d = points - np.array([x, y])  # (n, 2)
-    return np.stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1]], axis=1)
 
 
 def shoelace(ring: np.ndarray) -> float:

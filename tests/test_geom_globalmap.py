@@ -14,28 +14,11 @@ import numpy as np
 import pytest
 import shapely
 from icmapper import GlobalMap, geom
+from icmapper.testing.geom_reference import patch_polygon, to_world
 from shapely.geometry import LineString, Polygon
 
 # ---------------------------------------------------------------------------------------------
 # helpers
-
-
-def patch_polygon(pose: tuple[float, float, float], hx: float, hy: float) -> Polygon:
-    """The oriented patch as a shapely polygon (world frame)."""
-    x, y, yaw = pose
-    c, s = math.cos(yaw), math.sin(yaw)
-    corners = [(-hx, -hy), (hx, -hy), (hx, hy), (-hx, hy)]
-    return Polygon([(x + c * u - s * v, y + s * u + c * v) for u, v in corners])
-
-
-def to_world(points: np.ndarray, pose: tuple[float, float, float]) -> np.ndarray:
-    """Ego (..., 2) -> world (..., 2)."""
-    x, y, yaw = pose
-    c, s = math.cos(yaw), math.sin(yaw)
-    return np.stack(
-        [x + c * points[..., 0] - s * points[..., 1], y + s * points[..., 0] + c * points[..., 1]],
-        axis=-1,
-    )
 
 
 def seg_dist(p: np.ndarray, line: np.ndarray) -> np.ndarray:

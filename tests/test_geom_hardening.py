@@ -20,6 +20,7 @@ import icmapper
 import numpy as np
 import pytest
 from icmapper import GlobalMap, geom
+from icmapper.testing.geom_calls import POSE, point_entry_points
 
 # The ring of ~1e-299 m that made polygon_union spin for 15 CPU-minutes (issue 14, point 1).
 TINY_RING = [
@@ -197,7 +198,6 @@ def test_integer_arguments_accept_numpy_ints_and_refuse_floats() -> None:
 # 3. the coordinate domain: |x|, |y| <= 1e7 m, finite (non-finite results from finite inputs)
 
 MAX_COORD = 1e7
-POSE = (1.0, 2.0, 0.3)
 RING = np.array([[0.0, 0.0], [10.0, 0.0], [10.0, 5.0], [0.0, 5.0]])  # (4, 2)
 
 
@@ -208,31 +208,8 @@ def _map_with_line() -> GlobalMap:
     return m
 
 
-# Every engine function that takes points, with the rest of its arguments filled in.
-POINT_ENTRY_POINTS: dict[str, Any] = {
-    "resample": lambda p: geom.resample(p, 10),
-    "resample_closed": lambda p: geom.resample(p, 10, closed=True),
-    "resample_spacing": lambda p: geom.resample_spacing(p, 1.0),
-    "clip_to_patch": lambda p: geom.clip_to_patch(p, POSE, (5, 5)),
-    "clip_to_patch_closed": lambda p: geom.clip_to_patch(p, POSE, (5, 5), closed=True),
-    "fit_curve": lambda p: geom.fit_curve(p),
-    "merge_polyline_global": lambda p: geom.merge_polyline(p, LINE),
-    "merge_polyline_detected": lambda p: geom.merge_polyline(LINE, p),
-    "polygon_union_one": lambda p: geom.polygon_union([p]),
-    "polygon_union_two": lambda p: geom.polygon_union([RING, p]),
-    "polygon_union_three": lambda p: geom.polygon_union([RING, p, RING + 1.0]),
-    "chamfer_distance": lambda p: geom.chamfer_distance(LINE, p),
-    "chamfer_matrix": lambda p: geom.chamfer_matrix([LINE], [p]),
-    "insert_divider": lambda p: _map_with_line().insert(1, p),
-    "insert_crossing": lambda p: _map_with_line().insert(0, p),
-    "insert_with_id": lambda p: _map_with_line().insert_with_id(9, 2, p),
-    "merge_divider": lambda p: _map_with_line().merge(0, p),
-    "merge_crossing": lambda p: _map_with_line().merge(1, p),
-    "replace": lambda p: _map_with_line().replace(0, p),
-    "splice_polyline_stored": lambda p: geom.splice_polyline(p, LINE, 0.5),
-    "splice_polyline_new": lambda p: geom.splice_polyline(LINE, p, 0.5),
-    "splice": lambda p: _map_with_line().splice(0, p, 0.5),
-}
+# Every engine function that takes points, LINE and RING as the other line or ring.
+POINT_ENTRY_POINTS = point_entry_points(LINE, RING)
 
 
 @pytest.mark.timeout(30)

@@ -9,9 +9,9 @@ from typing import Any
 import numpy as np
 import pytest
 from icmapper import GlobalMap, geom
+from icmapper.testing.geom_calls import POSE, point_entry_points
 
 GOOD = np.array([[0.0, 0.0], [10.0, 0.0], [10.0, 5.0], [0.0, 5.0]])  # (4, 2), usable as a ring
-POSE = (1.0, 2.0, 0.3)
 
 
 def _map() -> GlobalMap:
@@ -20,23 +20,8 @@ def _map() -> GlobalMap:
     return m
 
 
-# Every function that takes an (n, 2) point array, with the rest of its arguments filled in.
-POINT_FUNCS: dict[str, Callable[[Any], Any]] = {
-    "resample": lambda p: geom.resample(p, 10),
-    "resample_closed": lambda p: geom.resample(p, 10, closed=True),
-    "resample_spacing": lambda p: geom.resample_spacing(p, 1.0),
-    "clip_to_patch": lambda p: geom.clip_to_patch(p, POSE, (5, 5)),
-    "clip_to_patch_closed": lambda p: geom.clip_to_patch(p, POSE, (5, 5), closed=True),
-    "fit_curve": lambda p: geom.fit_curve(p),
-    "merge_polyline_global": lambda p: geom.merge_polyline(p, GOOD),
-    "merge_polyline_detected": lambda p: geom.merge_polyline(GOOD, p),
-    "polygon_union": lambda p: geom.polygon_union([GOOD, p]),
-    "chamfer_distance": lambda p: geom.chamfer_distance(GOOD, p),
-    "chamfer_matrix": lambda p: geom.chamfer_matrix([GOOD], [p]),
-    "insert_divider": lambda p: _map().insert(1, p),
-    "insert_crossing": lambda p: _map().insert(0, p),
-    "merge": lambda p: _map().merge(0, p),
-}
+# Every engine function that takes an (n, 2) point array, GOOD as the other line or ring.
+POINT_FUNCS = point_entry_points(GOOD, GOOD)
 
 NAN = GOOD.copy()
 NAN[1, 0] = np.nan
