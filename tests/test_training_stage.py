@@ -316,15 +316,12 @@ def test_configs_load_and_validate(tmp_path: Path) -> None:
     assert (paper.model.num_queries, paper.model.num_points, paper.model.topk) == (100, 20, 33)
     assert paper.data.range == "60x30" and paper.score_threshold == 0.1
     bad = tmp_path / "bad.toml"
-    bad.write_text("[model]\nnum_querys = 3\n")
-    with pytest.raises(ValueError, match="num_querys"):
-        load_config(bad)
-    bad.write_text("[model]\nchannels = 'x'\n")
-    with pytest.raises(ValueError, match="channels"):
-        load_config(bad)
-    bad.write_text("[model]\ntopk = 99\n")
-    with pytest.raises(ValueError, match="topk"):
-        load_config(bad)
-    bad.write_text("[data\n")
-    with pytest.raises(ValueError, match="TOML"):
-        load_config(bad)
+    for text, named in (
+        ("[model]\nnum_querys = 3\n", "num_querys"),
+        ("[model]\nchannels = 'x'\n", "channels"),
+        ("[model]\ntopk = 99\n", "topk"),
+        ("[data\n", "TOML"),
+    ):
+        bad.write_text(text)
+        with pytest.raises(ValueError, match=named):
+            load_config(bad)

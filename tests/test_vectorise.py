@@ -3,6 +3,8 @@ comes back as the same instances; the detector's segmentation instances; GT ids 
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 import pytest
 import torch
@@ -155,20 +157,24 @@ def test_empty_and_bad_input() -> None:
         vectorise(bad, HX, HY)
     with pytest.raises(ValueError, match=r"\(K, X, Y\)"):
         vectorise(np.zeros((50, 25)), HX, HY)
-    with pytest.raises(ValueError, match="threshold"):
-        VectoriseParams(threshold=1.5)
-    with pytest.raises(ValueError, match="rectangularity"):
-        VectoriseParams(rectangularity=1.5)
-    with pytest.raises(ValueError, match="corner_tolerance"):
-        VectoriseParams(corner_tolerance=-1.0)
-    with pytest.raises(ValueError, match="ridge_threshold"):
-        VectoriseParams(ridge_threshold=0.0)
-    with pytest.raises(ValueError, match="ridge_sigma"):
-        VectoriseParams(ridge_sigma=0.0)
-    with pytest.raises(ValueError, match="ridge_curvature"):
-        VectoriseParams(ridge_curvature=-0.1)
-    with pytest.raises(ValueError, match="ridge_classes"):
-        VectoriseParams(ridge_classes=(0,))  # crossings are no lines
+
+
+# One bad setting each; the error must name it.
+BAD_PARAMS: dict[str, Any] = {
+    "threshold": 1.5,
+    "rectangularity": 1.5,
+    "corner_tolerance": -1.0,
+    "ridge_threshold": 0.0,
+    "ridge_sigma": 0.0,
+    "ridge_curvature": -0.1,
+    "ridge_classes": (0,),  # crossings are no lines
+}
+
+
+@pytest.mark.parametrize("name", list(BAD_PARAMS))
+def test_bad_params_named(name: str) -> None:
+    with pytest.raises(ValueError, match=name):
+        VectoriseParams(**{name: BAD_PARAMS[name]})
 
 
 def _parallel_dividers(half_gap: float, width: float) -> np.ndarray:
