@@ -7,6 +7,7 @@ import dataclasses
 import numpy as np
 import pytest
 from icmapper.data import MapClass, WorldMap, xy_yaw_to_pose
+from icmapper.data.nuscenes import NUSCENES_CAMERAS
 from icmapper.data.sim import (
     Renderer,
     generate_city,
@@ -22,14 +23,7 @@ SIZE = (64, 176)
 
 def test_rig_layout_and_projection() -> None:
     rig = nuscenes_rig((128, 352))
-    assert rig.names == (
-        "CAM_FRONT",
-        "CAM_FRONT_RIGHT",
-        "CAM_FRONT_LEFT",
-        "CAM_BACK",
-        "CAM_BACK_LEFT",
-        "CAM_BACK_RIGHT",
-    )
+    assert rig.names == NUSCENES_CAMERAS  # the real nuScenes reader's order (StreamMapNet's)
     assert rig.intrinsics.shape == (6, 3, 3) and rig.cam_to_ego.shape == (6, 4, 4)
     fwd = rig.cam_to_ego[:, :3, 2]  # camera z axes in the ego frame
     yaws = np.rad2deg(np.arctan2(fwd[:, 1], fwd[:, 0]))
