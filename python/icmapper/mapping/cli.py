@@ -283,11 +283,11 @@ def register(subparsers: Any) -> None:
         + formats_help()
     )
 
-    def add_parser(name: str, help: str, description: str) -> argparse.ArgumentParser:
+    def add_parser(name: str, summary: str, description: str) -> argparse.ArgumentParser:
         """A sub-command that lists the sources, methods and formats after its options."""
         return subparsers.add_parser(
             name,
-            help=help,
+            help=summary,
             formatter_class=argparse.RawDescriptionHelpFormatter,
             epilog=epilog,
             description=description,
