@@ -9,22 +9,10 @@ use icmap_geom::{
 };
 use std::time::Duration;
 
-/// SplitMix64: a tiny deterministic generator (no extra dependency).
-struct Rng(u64);
+#[path = "../src/splitmix.rs"]
+mod splitmix;
 
-impl Rng {
-    fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-        z ^ (z >> 31)
-    }
-    /// Uniform in [lo, hi).
-    fn uniform(&mut self, lo: f64, hi: f64) -> f64 {
-        lo + (hi - lo) * ((self.next_u64() >> 11) as f64 / (1u64 << 53) as f64)
-    }
-}
+use splitmix::Rng;
 
 /// Cell size of the synthetic grid, metres: one instance per cell.
 const CELL: f64 = 10.0;

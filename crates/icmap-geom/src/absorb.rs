@@ -138,7 +138,7 @@ impl GlobalMap {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::merge_map::tests::{map, rect};
+    use crate::test_util::{map, rect};
     use crate::types::{MapClass, Point};
 
     fn line(x0: f64, x1: f64, y: f64) -> Vec<Point> {

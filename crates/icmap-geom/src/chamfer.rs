@@ -65,11 +65,8 @@ pub fn chamfer_matrix(a: &[Vec<Point>], b: &[Vec<Point>]) -> Result<Vec<f64>> {
 mod tests {
     use super::*;
     use crate::error::GeomError;
+    use crate::test_util::p;
     use proptest::prelude::*;
-
-    fn p(x: f64, y: f64) -> Point {
-        Point::new(x, y)
-    }
 
     #[test]
     fn known_values() {

@@ -372,12 +372,9 @@ pub fn sample_pieces(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::test_util::p;
     use crate::types::Pose2;
     use proptest::prelude::*;
-
-    fn p(x: f64, y: f64) -> Point {
-        Point::new(x, y)
-    }
 
     fn unit_patch() -> Patch {
         Patch::new(Pose2::new(0.0, 0.0, 0.0).unwrap(), 1.0, 1.0, 0.0).unwrap()

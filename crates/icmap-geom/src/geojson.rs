@@ -78,11 +78,8 @@ pub fn write_geojson(map: &GlobalMap, path: &Path) -> Result<()> {
 mod tests {
     use super::*;
     use crate::store::MapConfig;
+    use crate::test_util::p;
     use crate::types::MapClass;
-
-    fn p(x: f64, y: f64) -> Point {
-        Point::new(x, y)
-    }
 
     fn map() -> GlobalMap {
         let instances = vec![

@@ -24,7 +24,11 @@ pub mod persist_v2;
 pub mod provenance;
 pub mod resample;
 pub mod splice;
+#[cfg(test)]
+mod splitmix;
 pub mod store;
+#[cfg(test)]
+mod test_util;
 pub mod types;
 pub mod union;
 mod union_fast;

@@ -411,11 +411,8 @@ mod tests {
     use super::*;
     use crate::clip::signed_area2;
     use crate::resample::dedup;
+    use crate::test_util::p;
     use proptest::prelude::*;
-
-    fn p(x: f64, y: f64) -> Point {
-        Point::new(x, y)
-    }
 
     /// Points along y = c from x0 to x1 every 1 m (x1 < x0 gives a reversed line).
     fn line(x0: f64, x1: f64, c: f64) -> Vec<Point> {

@@ -413,11 +413,8 @@ fn parse(bytes: &[u8], path: &str) -> Result<GlobalMap> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::test_util::p;
     use proptest::prelude::*;
-
-    fn p(x: f64, y: f64) -> Point {
-        Point::new(x, y)
-    }
 
     /// A map built from stored parts (no dependency on resampling), with a gap in the ids.
     fn sample_map() -> GlobalMap {

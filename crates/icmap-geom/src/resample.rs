@@ -249,11 +249,8 @@ fn resample_checked(points: &[Point], n: usize, closed: bool, total: f64) -> Vec
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::test_util::p;
     use proptest::prelude::*;
-
-    fn p(x: f64, y: f64) -> Point {
-        Point::new(x, y)
-    }
 
     #[test]
     fn length_open_and_closed() {

@@ -3,6 +3,9 @@
 //! coordinates); outside it, every entry point refuses the input with an error naming it, where
 //! finite inputs once gave `inf`, NaN or wrong geometry.
 
+mod common;
+
+use common::{finite, p};
 use icmap_geom::types::MAX_COORD;
 use icmap_geom::{
     chamfer_distance, chamfer_matrix, clip_polygon, clip_polyline, fit_curve, merge_polygon,
@@ -10,14 +13,6 @@ use icmap_geom::{
     MapConfig, Patch, Point, Pose2,
 };
 use proptest::prelude::*;
-
-fn p(x: f64, y: f64) -> Point {
-    Point::new(x, y)
-}
-
-fn finite(pts: &[Point]) -> bool {
-    pts.iter().all(|q| q.x.is_finite() && q.y.is_finite())
-}
 
 /// A coordinate anywhere in the domain, with its extremes over-represented: the edges, zero,
 /// tiny and subnormal magnitudes.

@@ -10,6 +10,9 @@
 //! The suite runs a bounded number of cases (a few seconds in release). A longer run:
 //! `ICMAP_FUZZ_CASES=100000 cargo test --release -p icmap-geom --test fuzz`.
 
+mod common;
+
+use common::{finite, p};
 use icmap_geom::persist::{fnv1a64, from_bytes, to_bytes};
 use icmap_geom::{
     chamfer_distance, chamfer_matrix, clip_polygon, clip_polyline, fit_curve, merge_polygon,
@@ -91,14 +94,6 @@ fn within<T: Send + 'static>(f: impl FnOnce() -> T + Send + 'static) -> T {
     });
     rx.recv_timeout(Duration::from_secs(20))
         .expect("an entry point did not return within 20 s")
-}
-
-fn p(x: f64, y: f64) -> Point {
-    Point::new(x, y)
-}
-
-fn finite(pts: &[Point]) -> bool {
-    pts.iter().all(|q| q.x.is_finite() && q.y.is_finite())
 }
 
 /// Any float, with the interesting ones over-represented: any bit pattern, the domain's edges

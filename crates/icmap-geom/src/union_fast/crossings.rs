@@ -33,6 +33,68 @@ pub(super) struct SweepBuffers {
     cand: Vec<u32>,
 }
 
+/// The sweep's buckets: `n` equal slices of `(lo, hi)` along the sweep axis. `of` is monotone in
+/// x, so a box overlapping box `e` starts in a bucket between `e`'s and that of `e`'s end.
+#[derive(Clone, Copy)]
+struct Buckets {
+    lo: f64,
+    scale: f64,
+    last: u32,
+}
+
+impl Buckets {
+    fn new((lo, hi): (f64, f64), n: usize) -> Self {
+        let scale = n as f64 / (hi - lo);
+        let scale = if scale.is_finite() { scale } else { 0.0 };
+        Self {
+            lo,
+            scale,
+            last: (n - 1) as u32,
+        }
+    }
+
+    /// The bucket of `x >= lo`.
+    #[inline(always)]
+    fn of(&self, x: f64) -> usize {
+        // (`as u32` saturates; the argument is never negative: `x >= lo`.)
+        (((x - self.lo) * self.scale) as u32).min(self.last) as usize
+    }
+}
+
+impl SweepBuffers {
+    /// Counting sort of `boxes` by the bucket of their start into `sorted`, stable;
+    /// `start[b]..start[b + 1]`: the boxes of bucket `b` in `sorted`.
+    fn sort_into_buckets(&mut self, boxes: &[SweepBox], buckets: Buckets, nb: usize) {
+        let SweepBuffers {
+            sorted,
+            start,
+            fill,
+            bucket_of,
+            ..
+        } = self;
+        start.clear();
+        start.resize(nb + 1, 0);
+        bucket_of.clear();
+        for bx in boxes.iter() {
+            let b = buckets.of(bx.x0);
+            bucket_of.push(b as u32);
+            start[b + 1] += 1;
+        }
+        for b in 0..nb {
+            start[b + 1] += start[b];
+        }
+        fill.clear();
+        fill.extend_from_slice(&start[..nb]);
+        sorted.clear();
+        sorted.extend_from_slice(boxes);
+        for (bx, &b) in boxes.iter().zip(bucket_of.iter()) {
+            let b = b as usize;
+            sorted[fill[b] as usize] = *bx;
+            fill[b] += 1;
+        }
+    }
+}
+
 /// Fills `crosses` with the proper crossings of an edge of ring 0 with an edge of ring 1 (their
 /// parameters along both edges, the point in the local and in the caller's frame, and the
 /// direction). `boxes` and `(lo, hi)` as [`build_edges`](super::edges::build_edges) returns them.
@@ -41,52 +103,25 @@ pub(super) struct SweepBuffers {
 pub(super) fn find_crossings(
     edges: &[Edge],
     boxes: &[SweepBox],
-    (lo, hi): (f64, f64),
+    range: (f64, f64),
     tol: f64,
     src: &Source<'_>,
     buf: &mut SweepBuffers,
     crosses: &mut Vec<Cross>,
 ) -> Option<()> {
     let tol2 = tol * tol;
+    // Candidate pairs: edges whose bounding boxes (grown by tol) overlap. The boxes are bucketed
+    // by their start along the sweep axis (a counting sort). Every pair is met once, from the box
+    // that comes first in bucket order.
+    let ne = edges.len();
+    let buckets = Buckets::new(range, ne);
+    buf.sort_into_buckets(boxes, buckets, ne);
     let SweepBuffers {
         sorted,
         start,
-        fill,
-        bucket_of,
         cand,
+        ..
     } = buf;
-    // Candidate pairs: edges whose bounding boxes (grown by tol) overlap. The boxes are bucketed
-    // by their start along the sweep axis (a counting sort: `bucket` is monotone in x, so a box
-    // overlapping box `e` starts in a bucket between `e`'s and that of `e`'s end). Every pair is
-    // met once, from the box that comes first in bucket order.
-    let ne = edges.len();
-    let nb = ne;
-    let scale = nb as f64 / (hi - lo);
-    let scale = if scale.is_finite() { scale } else { 0.0 };
-    let last_bucket = (nb - 1) as u32;
-    // (`as u32` saturates; the argument is never negative: `x >= lo`.)
-    let bucket = |x: f64| (((x - lo) * scale) as u32).min(last_bucket) as usize;
-    // `start[b]..start[b + 1]`: the boxes of bucket `b` in `sorted`.
-    start.clear();
-    start.resize(nb + 1, 0);
-    bucket_of.clear();
-    for bx in boxes.iter() {
-        let b = bucket(bx.x0);
-        bucket_of.push(b as u32);
-        start[b + 1] += 1;
-    }
-    for b in 0..nb {
-        start[b + 1] += start[b];
-    }
-    fill.clear();
-    fill.extend_from_slice(&start[..nb]);
-    sorted.clear();
-    sorted.extend_from_slice(boxes);
-    for (bx, &b) in boxes.iter().zip(bucket_of.iter()) {
-        let b = b as usize;
-        sorted[fill[b] as usize] = *bx;
-        fill[b] += 1;
-    }
 
     // The overlap test is branch-free (whether two boxes overlap is data-dependent, and a
     // mispredicted branch per pair costs more than the test): candidates are written to a buffer
@@ -95,7 +130,7 @@ pub(super) fn find_crossings(
     cand.clear();
     cand.resize(ne, 0);
     for (k, be) in sorted.iter().enumerate() {
-        let end = start[bucket(be.x1) + 1] as usize;
+        let end = start[buckets.of(be.x1) + 1] as usize;
         let mut nc = 0usize;
         // `end > k`: a box's own bucket is at most its end's bucket.
         for (bf, j) in sorted.get(k + 1..end).unwrap_or(&[]).iter().zip(k + 1..) {
@@ -112,90 +147,105 @@ pub(super) fn find_crossings(
             let bf = &sorted[j as usize];
             // Not neighbours (tested above).
             let (e, f) = (&edges[be.edge as usize], &edges[bf.edge as usize]);
-            let (p1, p2, q1, q2) = (e.p, e.q, f.p, f.q);
-            let (dp, dq) = (p2.sub(p1), q2.sub(q1));
-            let d1 = dq.cross(p1.sub(q1));
-            let d2 = dq.cross(p2.sub(q1));
-            let d3 = dp.cross(q1.sub(p1));
-            let d4 = dp.cross(q2.sub(p1));
-            // |d1| / |q| is p1's distance to q's line, which bounds its distance to q from below:
-            // only endpoints near the other edge's line need the exact segment distance.
-            let (lq, lp) = (tol * f.len * NEAR_MARGIN, tol * e.len * NEAR_MARGIN);
-            if (d1.abs() <= lq && near(p1, q1, q2, tol2))
-                || (d2.abs() <= lq && near(p2, q1, q2, tol2))
-                || (d3.abs() <= lp && near(q1, p1, p2, tol2))
-                || (d4.abs() <= lp && near(q2, p1, p2, tol2))
-            {
-                return None;
+            if let Some(c) = test_pair(e, f, tol, tol2, src)? {
+                crosses.push(c);
             }
-            if !((d1 > 0.0) != (d2 > 0.0) && (d3 > 0.0) != (d4 > 0.0)) {
-                continue;
-            }
-            if e.ring == f.ring {
-                return None; // self-crossing ring
-            }
-            // All four are well away from zero here (each endpoint is >= tol from the other
-            // segment and the crossing is proper), so both denominators are non-zero.
-            let (ea, ta, eb, tb, da, db, pa) = if e.ring == 0 {
-                (
-                    e.i,
-                    d1 / (d1 - d2),
-                    f.i,
-                    d3 / (d3 - d4),
-                    p2.sub(p1),
-                    q2.sub(q1),
-                    p1,
-                )
-            } else {
-                (
-                    f.i,
-                    d3 / (d3 - d4),
-                    e.i,
-                    d1 / (d1 - d2),
-                    q2.sub(q1),
-                    p2.sub(p1),
-                    q1,
-                )
-            };
-            if !(ta > 0.0 && ta < 1.0 && tb > 0.0 && tb < 1.0) {
-                return None;
-            }
-            let p = V {
-                x: pa.x + da.x * ta,
-                y: pa.y + da.y * ta,
-            };
-            // On an axis-parallel edge the crossing keeps that edge's exact coordinate (i_overlay
-            // keeps it too: the edge lies on a grid line), so that runs along axis-parallel edges
-            // and lowest-left ties are seen as i_overlay sees them.
-            let (wa, wb) = (src.orig(0, ea as usize), src.orig(1, eb as usize));
-            let pw = Point::new(
-                if da.x == 0.0 {
-                    wa.x
-                } else if db.x == 0.0 {
-                    wb.x
-                } else {
-                    p.x + src.origin.x
-                },
-                if da.y == 0.0 {
-                    wa.y
-                } else if db.y == 0.0 {
-                    wb.y
-                } else {
-                    p.y + src.origin.y
-                },
-            );
-            crosses.push(Cross {
-                ea,
-                ta,
-                eb,
-                tb,
-                p,
-                pw,
-                a_exits: da.cross(db) > 0.0,
-            });
         }
     }
     Some(())
+}
+
+/// The test of two edges that are not neighbours: `None` (decline) when an endpoint comes closer
+/// than `tol` to the other edge, or when the edges of one ring cross; `Some(Some(_))` for a
+/// proper crossing of the two rings, `Some(None)` when they do not cross.
+#[inline(always)]
+fn test_pair(e: &Edge, f: &Edge, tol: f64, tol2: f64, src: &Source<'_>) -> Option<Option<Cross>> {
+    let (p1, p2, q1, q2) = (e.p, e.q, f.p, f.q);
+    let (dp, dq) = (p2.sub(p1), q2.sub(q1));
+    let d1 = dq.cross(p1.sub(q1));
+    let d2 = dq.cross(p2.sub(q1));
+    let d3 = dp.cross(q1.sub(p1));
+    let d4 = dp.cross(q2.sub(p1));
+    // |d1| / |q| is p1's distance to q's line, which bounds its distance to q from below:
+    // only endpoints near the other edge's line need the exact segment distance.
+    let (lq, lp) = (tol * f.len * NEAR_MARGIN, tol * e.len * NEAR_MARGIN);
+    if (d1.abs() <= lq && near(p1, q1, q2, tol2))
+        || (d2.abs() <= lq && near(p2, q1, q2, tol2))
+        || (d3.abs() <= lp && near(q1, p1, p2, tol2))
+        || (d4.abs() <= lp && near(q2, p1, p2, tol2))
+    {
+        return None;
+    }
+    if !((d1 > 0.0) != (d2 > 0.0) && (d3 > 0.0) != (d4 > 0.0)) {
+        return Some(None);
+    }
+    if e.ring == f.ring {
+        return None; // self-crossing ring
+    }
+    // All four are well away from zero here (each endpoint is >= tol from the other
+    // segment and the crossing is proper), so both denominators are non-zero.
+    let (ea, ta, eb, tb, da, db, pa) = if e.ring == 0 {
+        (
+            e.i,
+            d1 / (d1 - d2),
+            f.i,
+            d3 / (d3 - d4),
+            p2.sub(p1),
+            q2.sub(q1),
+            p1,
+        )
+    } else {
+        (
+            f.i,
+            d3 / (d3 - d4),
+            e.i,
+            d1 / (d1 - d2),
+            q2.sub(q1),
+            p2.sub(p1),
+            q1,
+        )
+    };
+    if !(ta > 0.0 && ta < 1.0 && tb > 0.0 && tb < 1.0) {
+        return None;
+    }
+    let p = V {
+        x: pa.x + da.x * ta,
+        y: pa.y + da.y * ta,
+    };
+    Some(Some(Cross {
+        ea,
+        ta,
+        eb,
+        tb,
+        p,
+        pw: caller_point(p, (ea, da), (eb, db), src),
+        a_exits: da.cross(db) > 0.0,
+    }))
+}
+
+/// The crossing `p` of edge `ea` (direction `da`) of ring 0 with edge `eb` (direction `db`) of
+/// ring 1, in the caller's coordinates. On an axis-parallel edge the crossing keeps that edge's
+/// exact coordinate (i_overlay keeps it too: the edge lies on a grid line), so that runs along
+/// axis-parallel edges and lowest-left ties are seen as i_overlay sees them.
+#[inline(always)]
+fn caller_point(p: V, (ea, da): (u32, V), (eb, db): (u32, V), src: &Source<'_>) -> Point {
+    let (wa, wb) = (src.orig(0, ea as usize), src.orig(1, eb as usize));
+    Point::new(
+        if da.x == 0.0 {
+            wa.x
+        } else if db.x == 0.0 {
+            wb.x
+        } else {
+            p.x + src.origin.x
+        },
+        if da.y == 0.0 {
+            wa.y
+        } else if db.y == 0.0 {
+            wb.y
+        } else {
+            p.y + src.origin.y
+        },
+    )
 }
 
 #[cfg(test)]
@@ -204,6 +254,38 @@ mod tests {
     use super::super::primitives::load_ring;
     use super::super::test_util::{cross_properly, star, Rng};
     use super::*;
+
+    /// Builds the edges of rings `a` and `b` (local frame at `a[0]`) and runs the sweep: its
+    /// answer and the crossings found.
+    fn sweep(a: &[Point], b: &[Point]) -> (Option<()>, Vec<Cross>) {
+        let origin = a[0];
+        let (mut ra, mut rb) = (Vec::new(), Vec::new());
+        let (ba, _) = load_ring(a, origin, &mut ra);
+        let (bb, _) = load_ring(b, origin, &mut rb);
+        let (extent, along_x) = ba.join(&bb).extent().unwrap();
+        let tol = 1e-7 * extent;
+        let rings: [&[V]; 2] = [&ra, &rb];
+        let (mut edges, mut boxes) = (Vec::new(), Vec::new());
+        let range = build_edges(&rings, tol, along_x, &mut edges, &mut boxes).unwrap();
+        let src = Source {
+            a,
+            b,
+            origin,
+            rev_a: false,
+            rev_b: false,
+        };
+        let mut crosses = Vec::new();
+        let found = find_crossings(
+            &edges,
+            &boxes,
+            range,
+            tol,
+            &src,
+            &mut SweepBuffers::default(),
+            &mut crosses,
+        );
+        (found, crosses)
+    }
 
     /// The sweep finds exactly the proper crossings that testing every pair of edges finds, at
     /// the right points, on random star polygons (when it does not decline).
@@ -215,32 +297,7 @@ mod tests {
             let a = star(&mut rng, 0.0, 0.0, 3 + (seed % 37) as usize, 6.0);
             let (dx, dy) = (rng.uniform(-6.0, 6.0), rng.uniform(-6.0, 6.0));
             let b = star(&mut rng, dx, dy, 3 + (seed % 23) as usize, 5.0);
-            let origin = a[0];
-            let (mut ra, mut rb) = (Vec::new(), Vec::new());
-            let (ba, _) = load_ring(&a, origin, &mut ra);
-            let (bb, _) = load_ring(&b, origin, &mut rb);
-            let (extent, along_x) = ba.join(&bb).extent().unwrap();
-            let tol = 1e-7 * extent;
-            let rings: [&[V]; 2] = [&ra, &rb];
-            let (mut edges, mut boxes) = (Vec::new(), Vec::new());
-            let range = build_edges(&rings, tol, along_x, &mut edges, &mut boxes).unwrap();
-            let src = Source {
-                a: &a,
-                b: &b,
-                origin,
-                rev_a: false,
-                rev_b: false,
-            };
-            let mut crosses = Vec::new();
-            let found = find_crossings(
-                &edges,
-                &boxes,
-                range,
-                tol,
-                &src,
-                &mut SweepBuffers::default(),
-                &mut crosses,
-            );
+            let (found, crosses) = sweep(&a, &b);
             if found.is_none() {
                 continue;
             }
@@ -292,32 +349,7 @@ mod tests {
             Point::new(5.0, 1.0),
         ];
         for (a, b) in [(sq(0.0, 0.0), sq(1.0, 0.5)), (sq(0.0, 0.0), bowtie)] {
-            let origin = a[0];
-            let (mut ra, mut rb) = (Vec::new(), Vec::new());
-            let (ba, _) = load_ring(&a, origin, &mut ra);
-            let (bb, _) = load_ring(&b, origin, &mut rb);
-            let (extent, along_x) = ba.join(&bb).extent().unwrap();
-            let tol = 1e-7 * extent;
-            let rings: [&[V]; 2] = [&ra, &rb];
-            let (mut edges, mut boxes) = (Vec::new(), Vec::new());
-            let range = build_edges(&rings, tol, along_x, &mut edges, &mut boxes).unwrap();
-            let src = Source {
-                a: &a,
-                b: &b,
-                origin,
-                rev_a: false,
-                rev_b: false,
-            };
-            let mut crosses = Vec::new();
-            let found = find_crossings(
-                &edges,
-                &boxes,
-                range,
-                tol,
-                &src,
-                &mut SweepBuffers::default(),
-                &mut crosses,
-            );
+            let (found, _) = sweep(&a, &b);
             assert!(found.is_none());
         }
     }

@@ -87,10 +87,7 @@ pub(super) fn finish_ring(ring: &[Point], kept: &mut Vec<Point>) -> Option<Vec<P
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    fn p(x: f64, y: f64) -> Point {
-        Point::new(x, y)
-    }
+    use crate::test_util::p;
 
     #[test]
     fn runs_are_dropped_and_the_start_is_the_lowest_lefts_predecessor() {

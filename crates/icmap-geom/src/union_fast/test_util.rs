@@ -3,22 +3,7 @@
 
 use crate::types::Point;
 
-/// A tiny deterministic generator (splitmix64).
-pub(super) struct Rng(pub(super) u64);
-
-impl Rng {
-    pub(super) fn next(&mut self) -> f64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        ((z ^ (z >> 31)) >> 11) as f64 / (1u64 << 53) as f64
-    }
-
-    pub(super) fn uniform(&mut self, lo: f64, hi: f64) -> f64 {
-        lo + (hi - lo) * self.next()
-    }
-}
+pub(super) use crate::splitmix::Rng;
 
 /// A random star-shaped polygon (so simple), counter-clockwise: `k` vertices at increasing angles
 /// around `(cx, cy)`, at radii in `[0.4 r, r]`.

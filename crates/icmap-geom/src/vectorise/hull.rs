@@ -209,10 +209,7 @@ pub fn capsule_area(len: f64, r: f64) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    fn p(x: f64, y: f64) -> Point {
-        Point::new(x, y)
-    }
+    use crate::test_util::p;
 
     #[test]
     fn hull_is_clockwise_from_the_lowest_point_without_collinear_vertices() {

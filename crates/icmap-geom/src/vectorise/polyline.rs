@@ -81,10 +81,7 @@ pub fn resample_polyline(line: &[Point], n: usize, closed: bool) -> Vec<[f32; 2]
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    fn p(x: f64, y: f64) -> Point {
-        Point::new(x, y)
-    }
+    use crate::test_util::p;
 
     #[test]
     fn open_and_closed_resampling() {

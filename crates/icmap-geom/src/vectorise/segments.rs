@@ -255,10 +255,7 @@ fn nearest_endpoint(p1: Point, p2: Point, q1: Point, q2: Point) -> Point {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    fn p(x: f64, y: f64) -> Point {
-        Point::new(x, y)
-    }
+    use crate::test_util::p;
 
     #[test]
     fn intersections() {

@@ -173,10 +173,7 @@ pub fn simplify_ring(closed_pts: &[Point], tolerance: f64) -> Vec<Point> {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    fn p(x: f64, y: f64) -> Point {
-        Point::new(x, y)
-    }
+    use crate::test_util::p;
 
     #[test]
     fn douglas_peucker_on_a_line() {

@@ -48,13 +48,18 @@
 //! built in different orders (see `order_of_merges_changes_little`).
 
 use crate::error::{GeomError, Result};
-use crate::merge::{merge_polygon, merge_polyline};
-use crate::provenance::union_sorted;
-use crate::store::{GlobalMap, Instance, MapConfig};
-use crate::types::{validate_points, Point};
-use parry2d_f64::bounding_volume::BoundingVolume;
+use crate::store::{GlobalMap, Instance};
 use rayon::prelude::*;
-use std::collections::{HashMap, VecDeque};
+
+mod graph;
+mod outline;
+mod rule;
+
+use graph::{groups, overlap_edges, Node};
+pub use outline::instance_overlap;
+pub(crate) use outline::{overlap, Outline};
+pub(crate) use rule::merge_geometry;
+use rule::{merge_group, GroupOutcome, Members};
 
 /// Default gate of [`MergeMapParams`], metres.
 pub const DEFAULT_GATE: f64 = 1.5;
@@ -126,246 +131,6 @@ pub struct MergeMapStats {
     pub absorbed: usize,
 }
 
-/// Segments per block of [`Outline`].
-const BLOCK: usize = 8;
-
-/// An instance's geometry prepared for point-distance queries: its segments (a ring's closing edge
-/// included) in blocks of [`BLOCK`] with bounding boxes, so that blocks farther than the cutoff
-/// are skipped.
-pub(crate) struct Outline<'a> {
-    pts: &'a [Point],
-    closed: bool,
-    /// Per block: min x, min y, max x, max y of its segments' end points.
-    blocks: Vec<[f64; 4]>,
-}
-
-impl<'a> Outline<'a> {
-    pub(crate) fn new(inst: &'a Instance) -> Self {
-        Self::of(&inst.points, inst.closed)
-    }
-
-    fn of(pts: &'a [Point], closed: bool) -> Self {
-        let nseg = segment_count(pts.len(), closed);
-        let blocks = (0..nseg)
-            .step_by(BLOCK)
-            .map(|b0| {
-                let mut bb = [f64::INFINITY, f64::INFINITY, -f64::INFINITY, -f64::INFINITY];
-                for i in b0..=(b0 + BLOCK).min(nseg) {
-                    let q = pts[i % pts.len()];
-                    bb = [
-                        bb[0].min(q.x),
-                        bb[1].min(q.y),
-                        bb[2].max(q.x),
-                        bb[3].max(q.y),
-                    ];
-                }
-                bb
-            })
-            .collect();
-        Outline {
-            pts,
-            closed,
-            blocks,
-        }
-    }
-
-    /// The distance from `p` to the geometry (0 inside a ring) if it is at most `cutoff`.
-    fn distance_within(&self, p: &Point, cutoff: f64) -> Option<f64> {
-        if self.closed && inside_ring(self.pts, p) {
-            return Some(0.0);
-        }
-        let n = self.pts.len();
-        let nseg = segment_count(n, self.closed);
-        let mut best2 = cutoff * cutoff;
-        let mut found = false;
-        for (b, bb) in self.blocks.iter().enumerate() {
-            let dx = (bb[0] - p.x).max(p.x - bb[2]).max(0.0);
-            let dy = (bb[1] - p.y).max(p.y - bb[3]).max(0.0);
-            if dx * dx + dy * dy > best2 {
-                continue;
-            }
-            for i in b * BLOCK..((b + 1) * BLOCK).min(nseg) {
-                let d2 = segment_distance2(p, &self.pts[i], &self.pts[(i + 1) % n]);
-                if d2 <= best2 {
-                    best2 = d2;
-                    found = true;
-                }
-            }
-        }
-        found.then(|| best2.sqrt())
-    }
-}
-
-fn segment_count(n: usize, closed: bool) -> usize {
-    if closed {
-        n
-    } else {
-        n.saturating_sub(1)
-    }
-}
-
-/// Squared distance from `p` to the segment `a b`.
-fn segment_distance2(p: &Point, a: &Point, b: &Point) -> f64 {
-    let d = b - a;
-    let len2 = d.norm_squared();
-    let t = if len2 > 0.0 {
-        ((p - a).dot(&d) / len2).clamp(0.0, 1.0)
-    } else {
-        0.0
-    };
-    (p - (a + d * t)).norm_squared()
-}
-
-/// Whether `p` lies inside the ring (even-odd rule; a ring without a repeated point).
-fn inside_ring(ring: &[Point], p: &Point) -> bool {
-    let mut inside = false;
-    let n = ring.len();
-    let mut j = n - 1;
-    for i in 0..n {
-        let (a, b) = (ring[i], ring[j]);
-        if (a.y > p.y) != (b.y > p.y) && p.x < (b.x - a.x) * (p.y - a.y) / (b.y - a.y) + a.x {
-            inside = !inside;
-        }
-        j = i;
-    }
-    inside
-}
-
-/// Points of `pts` within `gate` of `outline`: their count and the sum of their distances.
-fn directed(pts: &[Point], outline: &Outline<'_>, gate: f64) -> (usize, f64) {
-    let mut count = 0;
-    let mut sum = 0.0;
-    for p in pts {
-        if let Some(d) = outline.distance_within(p, gate) {
-            count += 1;
-            sum += d;
-        }
-    }
-    (count, sum)
-}
-
-/// The overlap of two instances: `(max(s(a, b), s(b, a)), mean distance within the gate)` (see
-/// the module docs).
-pub(crate) fn overlap(a: &Outline<'_>, b: &Outline<'_>, gate: f64) -> (f64, f64) {
-    let (ca, sa) = directed(a.pts, b, gate);
-    let (cb, sb) = directed(b.pts, a, gate);
-    let share = (ca as f64 / a.pts.len() as f64).max(cb as f64 / b.pts.len() as f64);
-    let mean = if ca + cb > 0 {
-        (sa + sb) / (ca + cb) as f64
-    } else {
-        f64::INFINITY
-    };
-    (share, mean)
-}
-
-/// The overlap of instance `a` of one map with `b` of the other, as public helper for tests and
-/// callers that want the same test (`(share, mean distance)`, see the module docs).
-pub fn instance_overlap(a: &Instance, b: &Instance, gate: f64) -> (f64, f64) {
-    overlap(&Outline::new(a), &Outline::new(b), gate)
-}
-
-/// A node of the overlap graph: an instance of `self` (by id) or of `other` (by index in
-/// ascending id order).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
-enum Node {
-    Mine(u64),
-    Theirs(usize),
-}
-
-/// An overlapping pair found in step 2.
-#[derive(Debug, Clone, Copy)]
-struct Edge {
-    mine: u64,
-    theirs: usize,
-    share: f64,
-    mean: f64,
-}
-
-/// A connected group of the overlap graph, in merge order (its first node is the start).
-struct Group {
-    order: Vec<Node>,
-}
-
-/// The merged geometry of a group and which of its members made it in.
-struct GroupOutcome {
-    /// The merged instance (its id is decided on commit).
-    merged: Instance,
-    drives: Vec<u32>,
-    /// Members whose merge succeeded (the start included).
-    members: Vec<Node>,
-}
-
-/// Simple union-find over dense indices.
-struct UnionFind(Vec<usize>);
-
-impl UnionFind {
-    fn find(&mut self, mut x: usize) -> usize {
-        while self.0[x] != x {
-            self.0[x] = self.0[self.0[x]];
-            x = self.0[x];
-        }
-        x
-    }
-    fn union(&mut self, a: usize, b: usize) {
-        let (ra, rb) = (self.find(a), self.find(b));
-        if ra != rb {
-            let (lo, hi) = (ra.min(rb), ra.max(rb));
-            self.0[hi] = lo;
-        }
-    }
-}
-
-/// Whether every vertex of `pts` lies within `tol` of `outline`.
-fn within(pts: &[Point], outline: &Outline<'_>, tol: f64) -> bool {
-    pts.iter()
-        .all(|p| outline.distance_within(p, tol).is_some())
-}
-
-/// Whether `merged` is a faithful merge of the polylines `a` and `b`: every vertex of `a` and
-/// `b` within `tol` of it, every vertex of it within `tol` of `a` or `b`.
-fn faithful(merged: &[Point], a: &[Point], b: &[Point], tol: f64) -> bool {
-    let (om, oa, ob) = (
-        Outline::of(merged, false),
-        Outline::of(a, false),
-        Outline::of(b, false),
-    );
-    within(a, &om, tol)
-        && within(b, &om, tol)
-        && merged
-            .iter()
-            .all(|p| oa.distance_within(p, tol).is_some() || ob.distance_within(p, tol).is_some())
-}
-
-/// The class rule of a whole-instance merge: `detected` merged into `current`. Polylines: the
-/// curve-fit merge of `detected` into `current`, else of `current` into `detected` (the splice
-/// keeps the base's parts outside the other's projection, so the roles matter when the two only
-/// partly overlap), the first that is [`faithful`] within `tolerance`; neither is an error
-/// (the member is left out of the group).
-pub(crate) fn merge_geometry(
-    closed: bool,
-    current: &[Point],
-    detected: &[Point],
-    config: &MapConfig,
-    tolerance: f64,
-) -> Result<Vec<Point>> {
-    if closed {
-        let merged = merge_polygon(current, detected, config.spacing)?;
-        validate_points(&merged, 3, "merged geometry")?;
-        return Ok(merged);
-    }
-    for (base, other) in [(current, detected), (detected, current)] {
-        let merged = merge_polyline(base, other, config.smoothing, config.spacing)?;
-        validate_points(&merged, 2, "merged geometry")?;
-        if faithful(&merged, current, detected, tolerance) {
-            return Ok(merged);
-        }
-    }
-    Err(GeomError::Degenerate {
-        what: "polyline merge".into(),
-        reason: format!("no merge keeps both polylines within {tolerance} m"),
-    })
-}
-
 impl GlobalMap {
     /// Merges every instance of `other` into this map (see the module docs for the overlap test
     /// and the rules); `other` is unchanged. Errors only on bad parameters or when the map cannot
@@ -376,6 +141,40 @@ impl GlobalMap {
         params: MergeMapParams,
     ) -> Result<MergeMapStats> {
         params.validate()?;
+        self.check_room_for(other)?;
+        let theirs: Vec<&Instance> = other.instances();
+        // 1-2. Candidates from the index and the overlap test, against the map as it is now.
+        let edges = overlap_edges(self, &theirs, &params);
+        // 3. Groups: connected parts of the overlap graph, merged in parallel.
+        let members = Members {
+            this: self,
+            other,
+            theirs: &theirs,
+        };
+        let groups = groups(theirs.len(), &edges, |n| members.n_points(n));
+        let config = self.config();
+        let outcomes: Vec<GroupOutcome> = groups
+            .par_iter()
+            .map(|g| merge_group(g, members, &config, params.tolerance))
+            .collect();
+        // 4. Commit: the groups, then the inserts (ascending id of `other`).
+        let mut stats = MergeMapStats::default();
+        let mut placed = vec![false; theirs.len()];
+        for out in outcomes {
+            self.commit_group(out, &mut placed, &mut stats)?;
+        }
+        for (j, b) in theirs.iter().enumerate() {
+            if !placed[j] {
+                let id = self.insert_instance((*b).clone())?;
+                self.set_drives(id, other.drives(b.id))?;
+                stats.inserted += 1;
+            }
+        }
+        Ok(stats)
+    }
+
+    /// Errors when this map cannot take `other`'s instances (ids or slots exhausted).
+    fn check_room_for(&self, other: &GlobalMap) -> Result<()> {
         if self.len().saturating_add(other.len()) >= u32::MAX as usize
             || self.next_id().saturating_add(other.len() as u64) == u64::MAX
         {
@@ -387,229 +186,66 @@ impl GlobalMap {
                 ),
             });
         }
-        let gate = params.gate;
-        let theirs: Vec<&Instance> = other.instances();
-        // 1-2. Candidates from the index and the overlap test, against the map as it is now.
-        let this: &GlobalMap = self;
-        let edges: Vec<Vec<Edge>> = theirs
-            .par_iter()
-            .enumerate()
-            .map(|(j, b)| {
-                let ob = Outline::new(b);
-                this.query_aabb(&b.aabb().loosened(gate))
-                    .into_iter()
-                    .filter_map(|id| {
-                        let a = this.get(id)?;
-                        if a.class != b.class {
-                            return None;
-                        }
-                        let (share, mean) = overlap(&ob, &Outline::new(a), gate);
-                        (share >= params.min_overlap).then_some(Edge {
-                            mine: id,
-                            theirs: j,
-                            share,
-                            mean,
-                        })
-                    })
-                    .collect()
+        Ok(())
+    }
+
+    /// Commits a merged group: under the lowest id of its instances of `self` (the others of
+    /// `self` are removed, "absorbed"), or as a new instance when it has none; marks its members
+    /// of `other` as placed and counts them in `stats`.
+    fn commit_group(
+        &mut self,
+        out: GroupOutcome,
+        placed: &mut [bool],
+        stats: &mut MergeMapStats,
+    ) -> Result<()> {
+        let holder = out
+            .members
+            .iter()
+            .filter_map(|n| match n {
+                Node::Mine(id) => Some(*id),
+                Node::Theirs(_) => None,
             })
-            .collect();
-        // 3. Groups: connected parts of the overlap graph (dense node numbers: `other`'s
-        // instances first, then `self`'s in order of first appearance).
-        let mut mine_node: HashMap<u64, usize> = HashMap::new();
-        let mut mine_ids: Vec<u64> = Vec::new();
-        for e in edges.iter().flatten() {
-            mine_node.entry(e.mine).or_insert_with(|| {
-                mine_ids.push(e.mine);
-                theirs.len() + mine_ids.len() - 1
-            });
-        }
-        let node_of = |n: Node| match n {
-            Node::Theirs(j) => j,
-            Node::Mine(id) => mine_node[&id],
-        };
-        let node_at = |k: usize| {
-            if k < theirs.len() {
-                Node::Theirs(k)
-            } else {
-                Node::Mine(mine_ids[k - theirs.len()])
+            .min();
+        let id = match holder {
+            Some(id) => {
+                let mut inst = out.merged;
+                inst.id = id;
+                self.put(inst)?;
+                id
             }
+            None => self.insert_instance(out.merged)?,
         };
-        let total = theirs.len() + mine_ids.len();
-        let mut uf = UnionFind((0..total).collect());
-        let mut adjacency: Vec<Vec<(Node, f64, f64)>> = vec![Vec::new(); total];
-        for e in edges.iter().flatten() {
-            let (a, b) = (mine_node[&e.mine], e.theirs);
-            uf.union(a, b);
-            adjacency[a].push((Node::Theirs(e.theirs), e.share, e.mean));
-            adjacency[b].push((Node::Mine(e.mine), e.share, e.mean));
-        }
-        // Neighbours by overlap: larger share, smaller mean distance, lower id.
-        for list in &mut adjacency {
-            list.sort_by(|x, y| {
-                y.1.total_cmp(&x.1)
-                    .then(x.2.total_cmp(&y.2))
-                    .then(x.0.cmp(&y.0))
-            });
-        }
-        let mut members: HashMap<usize, Vec<usize>> = HashMap::new();
-        for (k, list) in adjacency.iter().enumerate() {
-            if !list.is_empty() {
-                let root = uf.find(k);
-                members.entry(root).or_default().push(k);
-            }
-        }
-        let n_points = |n: Node| match n {
-            Node::Theirs(j) => theirs[j].points.len(),
-            Node::Mine(id) => this.get(id).map_or(0, |i| i.points.len()),
-        };
-        // (One `seen` for all groups: they are disjoint.)
-        let mut seen = vec![false; total];
-        let mut groups: Vec<Group> = members
-            .into_values()
-            .map(|nodes| {
-                // Start: most points, then an instance of `self`, then the lowest id.
-                let start = nodes
-                    .iter()
-                    .map(|&k| node_at(k))
-                    .min_by(|&x, &y| {
-                        n_points(y)
-                            .cmp(&n_points(x))
-                            .then(matches!(y, Node::Mine(_)).cmp(&matches!(x, Node::Mine(_))))
-                            .then(x.cmp(&y))
-                    })
-                    .expect("a group has members");
-                let mut order = vec![start];
-                seen[node_of(start)] = true;
-                let mut queue = VecDeque::from([start]);
-                while let Some(n) = queue.pop_front() {
-                    for &(next, _, _) in &adjacency[node_of(n)] {
-                        let k = node_of(next);
-                        if !seen[k] {
-                            seen[k] = true;
-                            order.push(next);
-                            queue.push_back(next);
-                        }
+        for n in &out.members {
+            match *n {
+                Node::Theirs(j) => {
+                    placed[j] = true;
+                    if holder.is_some() {
+                        stats.merged += 1;
                     }
                 }
-                Group { order }
-            })
-            .collect();
-        // Fixed commit order: by the group's lowest node.
-        groups.sort_by_key(|g| g.order.iter().copied().min());
-        // The merges of the groups, in parallel.
-        let config = self.config();
-        let instance = |n: Node| -> &Instance {
-            match n {
-                Node::Theirs(j) => theirs[j],
-                Node::Mine(id) => this.get(id).expect("an instance of self in a group"),
-            }
-        };
-        let drives_of = |n: Node| -> &[u32] {
-            match n {
-                Node::Theirs(j) => other.drives(theirs[j].id),
-                Node::Mine(id) => this.drives(id),
-            }
-        };
-        let outcomes: Vec<GroupOutcome> = groups
-            .par_iter()
-            .map(|g| {
-                let start = instance(g.order[0]);
-                let mut merged = start.clone();
-                let mut drives = drives_of(g.order[0]).to_vec();
-                let mut ok = vec![g.order[0]];
-                for &n in &g.order[1..] {
-                    let inst = instance(n);
-                    if let Ok(points) = merge_geometry(
-                        merged.closed,
-                        &merged.points,
-                        &inst.points,
-                        &config,
-                        params.tolerance,
-                    ) {
-                        merged.points = points;
-                        merged.first_frame = merged.first_frame.min(inst.first_frame);
-                        merged.last_frame = merged.last_frame.max(inst.last_frame);
-                        merged.observations = merged.observations.saturating_add(inst.observations);
-                        drives = union_sorted(&drives, drives_of(n));
-                        ok.push(n);
-                    }
+                Node::Mine(m) if m != id => {
+                    self.remove(m)?;
+                    stats.absorbed += 1;
                 }
-                GroupOutcome {
-                    merged,
-                    drives,
-                    members: ok,
-                }
-            })
-            .collect();
-        // 4. Commit: the groups, then the inserts (ascending id of `other`).
-        let mut stats = MergeMapStats::default();
-        let mut placed = vec![false; theirs.len()];
-        for out in outcomes {
-            let holder = out
-                .members
-                .iter()
-                .filter_map(|n| match n {
-                    Node::Mine(id) => Some(*id),
-                    Node::Theirs(_) => None,
-                })
-                .min();
-            let id = match holder {
-                Some(id) => {
-                    let mut inst = out.merged;
-                    inst.id = id;
-                    self.put(inst)?;
-                    id
-                }
-                None => self.insert_instance(out.merged)?,
-            };
-            for n in &out.members {
-                match *n {
-                    Node::Theirs(j) => {
-                        placed[j] = true;
-                        if holder.is_some() {
-                            stats.merged += 1;
-                        }
-                    }
-                    Node::Mine(m) if m != id => {
-                        self.remove(m)?;
-                        stats.absorbed += 1;
-                    }
-                    Node::Mine(_) => {}
-                }
-            }
-            if holder.is_none() {
-                stats.inserted += 1;
-                // (The other members of such a group, all of `other`, count as merged into it.)
-                stats.merged += out.members.len() - 1;
-            }
-            self.set_drives(id, &out.drives)?;
-        }
-        for (j, b) in theirs.iter().enumerate() {
-            if !placed[j] {
-                let id = self.insert_instance((*b).clone())?;
-                self.set_drives(id, other.drives(b.id))?;
-                stats.inserted += 1;
+                Node::Mine(_) => {}
             }
         }
-        Ok(stats)
+        if holder.is_none() {
+            stats.inserted += 1;
+            // (The other members of such a group, all of `other`, count as merged into it.)
+            stats.merged += out.members.len() - 1;
+        }
+        self.set_drives(id, &out.drives)
     }
 }
 
 #[cfg(test)]
-pub(crate) mod tests {
+mod tests {
+    use super::outline::{segment_count, segment_distance2};
     use super::*;
-    use crate::store::MapConfig;
-    use crate::types::MapClass;
+    use crate::test_util::{map, p, rect};
+    use crate::types::{MapClass, Point};
     use proptest::prelude::*;
-
-    fn p(x: f64, y: f64) -> Point {
-        Point::new(x, y)
-    }
-
-    pub(crate) fn map() -> GlobalMap {
-        GlobalMap::new(MapConfig::default()).unwrap()
-    }
 
     /// A gently curved polyline along x from `x0` to `x1` at height `y`.
     fn curve(x0: f64, x1: f64, y: f64) -> Vec<Point> {
@@ -620,16 +256,6 @@ pub(crate) mod tests {
                 p(x, y + 2.0 * (x / 40.0).sin())
             })
             .collect()
-    }
-
-    /// The axis-aligned rectangle of centre (cx, cy) and half sizes hx, hy, counter-clockwise.
-    pub(crate) fn rect(cx: f64, cy: f64, hx: f64, hy: f64) -> Vec<Point> {
-        vec![
-            p(cx - hx, cy - hy),
-            p(cx + hx, cy - hy),
-            p(cx + hx, cy + hy),
-            p(cx - hx, cy + hy),
-        ]
     }
 
     /// Distance from `q` to the polyline / ring boundary `pts`.
