@@ -9,6 +9,16 @@ use crate::convert::{
     extents_arg, matrix_to_py, n_arg, point_sets_arg, points_arg, points_to_py, pose_arg,
 };
 use crate::errors::IntoPyResult;
+use pyo3::marker::Ungil;
+
+/// Runs `op` on points with the GIL released; its points as an `(N, 2)` array, or its error.
+fn points_op<'py>(
+    py: Python<'py>,
+    op: impl Ungil + FnOnce() -> geom::Result<Vec<geom::Point>>,
+) -> PyResult<Bound<'py, PyArray2<f64>>> {
+    let out = py.detach(op).py_err()?;
+    Ok(points_to_py(py, &out))
+}
 
 fn list_of_arrays<'py>(
     py: Python<'py>,
@@ -27,8 +37,7 @@ pub fn resample<'py>(
     closed: bool,
 ) -> PyResult<Bound<'py, PyArray2<f64>>> {
     let pts = points_arg(points, "points")?;
-    let out = py.detach(|| geom::resample(&pts, n, closed)).py_err()?;
-    Ok(points_to_py(py, &out))
+    points_op(py, || geom::resample(&pts, n, closed))
 }
 
 /// Points about `spacing` apart by arc length.
@@ -41,10 +50,7 @@ pub fn resample_spacing<'py>(
     closed: bool,
 ) -> PyResult<Bound<'py, PyArray2<f64>>> {
     let pts = points_arg(points, "points")?;
-    let out = py
-        .detach(|| geom::resample_spacing(&pts, spacing, closed))
-        .py_err()?;
-    Ok(points_to_py(py, &out))
+    points_op(py, || geom::resample_spacing(&pts, spacing, closed))
 }
 
 /// The parts of `points` inside the patch of `pose`, same frame as the input.
@@ -92,10 +98,7 @@ pub fn splice_polyline<'py>(
 ) -> PyResult<Bound<'py, PyArray2<f64>>> {
     let a = points_arg(stored, "stored")?;
     let b = points_arg(new, "new")?;
-    let out = py
-        .detach(|| geom::splice_polyline(&a, &b, overlap))
-        .py_err()?;
-    Ok(points_to_py(py, &out))
+    points_op(py, || geom::splice_polyline(&a, &b, overlap))
 }
 
 /// Smoothing cubic spline fit (scipy `splprep(s=s)` semantics), evaluated about `spacing` apart.
@@ -108,8 +111,7 @@ pub fn fit_curve<'py>(
     spacing: f64,
 ) -> PyResult<Bound<'py, PyArray2<f64>>> {
     let pts = points_arg(points, "points")?;
-    let out = py.detach(|| geom::fit_curve(&pts, s, spacing)).py_err()?;
-    Ok(points_to_py(py, &out))
+    points_op(py, || geom::fit_curve(&pts, s, spacing))
 }
 
 /// Merges a detected polyline into a global one (Algorithm 2); keeps the global direction.
@@ -124,10 +126,7 @@ pub fn merge_polyline<'py>(
 ) -> PyResult<Bound<'py, PyArray2<f64>>> {
     let g = points_arg(global_pts, "global_pts")?;
     let d = points_arg(detected_pts, "detected_pts")?;
-    let out = py
-        .detach(|| geom::merge_polyline(&g, &d, s, spacing))
-        .py_err()?;
-    Ok(points_to_py(py, &out))
+    points_op(py, || geom::merge_polyline(&g, &d, s, spacing))
 }
 
 /// Union of closed rings: outer rings, counter-clockwise, largest area first.
