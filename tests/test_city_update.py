@@ -28,6 +28,7 @@ from icmapper.data.types import (
 
 if TYPE_CHECKING:
     from icmapper._icmap import GlobalMap
+    from icmapper.city.update import ChangeDetector
     from icmapper.city.update_run import UpdateResult
 
 
@@ -126,6 +127,41 @@ def _detect(stored: WorldMap, now: WorldMap, noise: str = "low") -> list:
         d = oracle.detect(fr)
         det.observe((7, i), fr.pose, d.classes, d.scores, d.points)
     return det.decide()
+
+
+def _observed(stored: WorldMap, now: WorldMap, drive: int = 7) -> ChangeDetector:
+    """A ChangeDetector of the map of ``stored`` that saw one drive through ``now`` (oracle:low)."""
+    from icmapper.city.update import ChangeDetector
+    from icmapper.mapping.oracle import OracleDetector
+
+    det = ChangeDetector(_stored(stored), RANGE_60x30, lambda p: np.ones(len(p), bool))
+    seq = _drive(now)
+    oracle = OracleDetector(seq, RANGE_60x30, "low", seed=drive)
+    for i in range(len(seq)):
+        fr = seq.frame(i, with_images=False)
+        d = oracle.detect(fr)
+        det.observe((drive, i), fr.pose, d.classes, d.scores, d.points)
+    return det
+
+
+def test_moves_relative_to_the_reference() -> None:
+    """A detector that draws a line 0.6 m off the map (its bias there, seen by the city's own
+    drives: the reference) reports no move for it; a move of 1 m beyond the bias is reported
+    as 1 m."""
+    stored = _world([])
+    biased = _world([])
+    biased.instances[1] = replace(
+        biased.instances[1], points=biased.instances[1].points + [0, -0.6]
+    )
+    reference = _observed(stored, biased, drive=1)
+    (ch,) = _observed(stored, biased).decide()  # without the reference: a move of 0.6 m
+    assert (ch.change, ch.instance) == ("moved", 2)
+    assert _observed(stored, biased).decide(reference=reference) == []
+    moved = _world([])
+    moved.instances[1] = replace(moved.instances[1], points=moved.instances[1].points + [0, -1.6])
+    (ch,) = _observed(stored, moved).decide(reference=reference)
+    assert (ch.change, ch.instance) == ("moved", 2)
+    assert ch.offset == pytest.approx(-1.0, abs=0.15)
 
 
 def _only(world: WorldMap, keep: set[int], extra: list | None = None) -> WorldMap:

@@ -32,6 +32,12 @@ Decisions (``decide``), from all frames of all drives observed:
 - added: a candidate sighted in >= ``add_frames`` frames and in at least ``add_share`` of the
   frames in which it was in view; its geometry is the engine's merge of its sightings (a crossing:
   the sighting closest to all others).
+
+With a ``reference`` (``decide(reference=...)``: the same detector fed with the city's own drives,
+the detections the map was built from), what the detector already showed before the change is
+taken out: a stored point's offset counts relative to the reference's median offset there
+(the detector's own bias at that place: a learned detector draws some lines a fixed 0.3-0.6 m
+off the map, and a move is what changed beyond that).
 """
 
 from __future__ import annotations
@@ -342,9 +348,10 @@ class ChangeDetector:
                     cand.evidence.missed.append(key)
 
     # ------------------------------------------------------------------ decisions
-    def decide(self) -> list[Change]:
+    def decide(self, reference: ChangeDetector | None = None) -> list[Change]:
         """The confirmed changes (removals, moves, then additions; by instance id / first
-        sighting)."""
+        sighting). ``reference``: the detector fed with the city's own drives against the same
+        map (module docstring): moves relative to its offsets."""
         out: list[Change] = []
         moves: list[Change] = []
         for i in sorted(self.stored):
@@ -359,7 +366,10 @@ class ChangeDetector:
                 out.append(Change("removed", s.cls, i, s.points, s.closed, ev))
                 continue
             if not s.closed:
-                move = self._move(i, s)
+                bias = None
+                if reference is not None and i in reference.stored:
+                    bias = reference._median_offsets(reference.stored[i])
+                move = self._move(i, s, bias)
                 if move is not None:
                     moves.append(move)
         out += moves
@@ -373,11 +383,32 @@ class ChangeDetector:
                 out.append(Change("added", cand.cls, -1, pts, closed, ev, new_points=pts))
         return out
 
-    def _move(self, i: int, s: _Stored) -> Change | None:
+    def _median_offsets(self, s: _Stored) -> NDArray[np.float64]:
+        """(n,) the median sideways offset of each stored point observed in >= ``move_obs``
+        frames (NaN elsewhere)."""
+        n = len(s.points)
+        med = np.full(n, np.nan)
+        if not s.obs_idx:
+            return med
+        idx = np.concatenate(s.obs_idx)  # (o,)
+        off = np.concatenate(s.obs_off)  # (o,)
+        count = np.bincount(idx, minlength=n)  # (n,)
+        order = np.argsort(idx, kind="stable")
+        starts = np.concatenate([[0], np.cumsum(count)])
+        sorted_off = off[order]
+        for v in np.flatnonzero(count >= self.cfg.move_obs):
+            med[v] = np.median(sorted_off[starts[v] : starts[v + 1]])
+        return med
+
+    def _move(self, i: int, s: _Stored, bias: NDArray[np.float64] | None = None) -> Change | None:
+        """A move of stored line ``i``, if any; ``bias`` (n,): the reference's median offset
+        per point (NaN: none), taken off the observed offsets."""
         if not s.obs_idx:
             return None
         idx = np.concatenate(s.obs_idx)  # (o,)
         off = np.concatenate(s.obs_off)  # (o,)
+        if bias is not None:
+            off = off - np.nan_to_num(bias, nan=0.0)[idx]
         n = len(s.points)
         count = np.bincount(idx, minlength=n)  # (n,)
         med = np.zeros(n)  # (n,)

@@ -219,8 +219,9 @@ def update_city(
             detector.observe((drive, i), frame.pose, det.classes, det.scores, det.points)
             bar.update(1)
     bar.close()
-    changes = detector.decide()
-    mark_map_errors(changes, _history_changes(city, manifest, gmap, rng, config))
+    replay = _history_replay(city, manifest, gmap, rng, config)
+    changes = detector.decide(reference=replay)
+    mark_map_errors(changes, replay.decide())
     apply_changes(gmap, changes, drive=first)
     index = len(updates.updates)
     folder = city / "updates" / f"{index:04d}"
@@ -234,11 +235,12 @@ def update_city(
     return UpdateResult(entry, changes, folder)
 
 
-def _history_changes(
+def _history_replay(
     city: Path, manifest: Any, gmap: Any, rng: Any, config: UpdateConfig
-) -> list[Change]:
-    """What the city's own drives (their recorded predictions, replayed) disagree with the map
-    about: map errors, not changes of the road."""
+) -> ChangeDetector:
+    """The change detector fed with the city's own drives (their recorded predictions,
+    replayed): what they disagree with the map about (``decide``) are map errors, not changes of
+    the road, and their offsets and sightings are the reference of the update's."""
     from icmapper.eval.runfmt import read_run
 
     runs = [read_run(city / d.run) for d in manifest.ok_drives()]
@@ -249,7 +251,7 @@ def _history_changes(
             for t in range(len(seq)):
                 fp = seq.frame(t)
                 replay.observe((d.index, fp.frame_index), fp.pose, fp.classes, fp.scores, fp.points)
-    return replay.decide()
+    return replay
 
 
 def _true_changes(specs: list[str]) -> list[Any] | None:
