@@ -58,6 +58,8 @@ def test_same_instances_as_the_reference_on_recorded_masks() -> None:
         {"ridge_classes": ()},  # dividers by the plain threshold
         {"ridge_classes": (1, 2), "through": 30.0, "spur": 2.0},
         {"rectangularity": 0.0},  # touching crossings not split
+        {"edge_margin": 0.0},  # ridge lines along the front and back edges kept
+        {"edge_margin": 3.0, "edge_span": 1.0},
         {"hull_simplify": 0.0},  # minimum rotated rectangles
         {"shrink": 0.0},
         {"upsample": 3, "num_points": 7},
@@ -132,3 +134,34 @@ def test_binding_contract() -> None:
     b = _icmap.vectorise(np.ascontiguousarray(wide[:, :, ::2]), 30.0, 15.0)
     for x, y in zip(a, b, strict=True):
         np.testing.assert_array_equal(x, y)
+
+
+def test_ridge_lines_along_the_front_and_back_edges_are_dropped() -> None:
+    """The edge rule fires on the recorded masks, on dividers only, and only on lines lying along
+    the front or back edge of the grid (what it drops is there with ``edge_margin = 0``)."""
+    frames, hx, hy = _frames()
+    dropped = 0
+    for prob in frames:
+        keep = vectorise(prob, hx, hy)
+        every = vectorise(prob, hx, hy, VectoriseParams(edge_margin=0.0))
+        for c in (0, 2):  # crossings and boundaries untouched
+            np.testing.assert_array_equal(keep.points[keep.classes == c],
+                                          every.points[every.classes == c])  # fmt: skip
+        kept = {p.tobytes() for p in keep.points[keep.classes == 1]}
+        for p in every.points[every.classes == 1]:
+            if p.tobytes() in kept:
+                continue
+            dropped += 1
+            assert (np.abs(p[:, 0]) > hx - 1.5).mean() > 0.8 and np.ptp(p[:, 1]) > 3.0
+    assert dropped > 0
+
+
+def test_the_edge_rule_on_a_hand_made_mask() -> None:
+    """A divider ridge across the grid at its front edge goes; the same line a metre inside stays
+    (50x25 cells over 60x30 m)."""
+    prob = np.zeros((3, 50, 25), np.float32)
+    prob[1, 49, 4:20] = 0.95  # the last row of cells: x in [28.8, 30]
+    assert len(vectorise(prob, 30.0, 15.0, VectoriseParams(edge_margin=0.0))) == 1
+    assert len(vectorise(prob, 30.0, 15.0)) == 0
+    prob = np.roll(prob, -3, axis=1)  # 3.6 m inside
+    assert len(vectorise(prob, 30.0, 15.0)) == 1

@@ -291,6 +291,17 @@ def _ridge_mask(
     return (prob > p.ridge_threshold) & (low < -p.ridge_curvature * px * px)
 
 
+def _along_edge(pts: NDArray[np.float32], half_x: float, margin: float, span: float) -> bool:
+    """A line (P, 2) ego along the front or back edge of the grid: more than 80 % of its points
+    within ``margin`` of |x| = half_x, spanning more than ``span`` in y (float64)."""
+    if margin <= 0 or len(pts) == 0:
+        return False
+    q = np.asarray(pts, np.float64)
+    if not (np.abs(q[:, 0]) > half_x - margin).mean() > 0.8:
+        return False
+    return float(q[:, 1].max() - q[:, 1].min()) > span
+
+
 def vectorise_reference(
     prob: NDArray[np.floating],
     half_x: float,
@@ -359,9 +370,12 @@ def vectorise_reference(
             continue
         for path, line in _skeleton_branches(mask, metres, p.min_length, p.through, p.spur):
             simple = np.asarray(line.simplify(p.simplify).coords, np.float64)
+            pts = resample_polyline(simple, p.num_points, closed=False)
+            if k in p.ridge_classes and _along_edge(pts, half_x, p.edge_margin, p.edge_span):
+                continue
             classes.append(k)
             scores.append(float(prob[k][path[:, 0], path[:, 1]].mean()))
-            points.append(resample_polyline(simple, p.num_points, closed=False))
+            points.append(pts)
     n_out = len(classes)
     return VectorInstances(
         np.asarray(classes, np.int64),

@@ -16,6 +16,8 @@
 //! - [`hull`], [`buffer`], [`principal`]: convex hulls, mitre offsets and principal axes of cell
 //!   sets (GEOS / LAPACK semantics);
 //! - [`crossings`]: crossing components, cut into one part per crossing, and their outlines;
+//! - [`edge`]: ridge lines along the front and back edges of the grid (the zero padding's, not
+//!   a line's) dropped;
 //! - [`polyline`]: arc-length resampling (numpy `interp` semantics) and polyline lengths.
 //!
 //! It reproduces `icmapper.testing.vectorise_reference` (numpy / scipy / scikit-image / shapely),
@@ -25,6 +27,7 @@
 pub mod branches;
 pub mod buffer;
 pub mod crossings;
+pub mod edge;
 pub mod hull;
 pub mod polyline;
 pub mod principal;
@@ -87,6 +90,11 @@ pub struct VectoriseParams {
     pub ridge_curvature: f64,
     /// Points per instance.
     pub num_points: usize,
+    /// Metres; a ridge-class line within this of the front or back edge of the grid (and
+    /// spanning more than `edge_span` across it) is the padding's ridge and is dropped (0: kept).
+    pub edge_margin: f64,
+    /// Metres a dropped edge line spans across the edge at least.
+    pub edge_span: f64,
 }
 
 impl Default for VectoriseParams {
@@ -109,6 +117,8 @@ impl Default for VectoriseParams {
             ridge_sigma: 0.6,
             ridge_curvature: 0.22,
             num_points: 20,
+            edge_margin: 1.5,
+            edge_span: 3.0,
         }
     }
 }
@@ -175,6 +185,8 @@ impl VectoriseParams {
             ("hull_simplify", self.hull_simplify),
             ("ridge_curvature", self.ridge_curvature),
             ("spur", self.spur),
+            ("edge_margin", self.edge_margin),
+            ("edge_span", self.edge_span),
         ] {
             // NaN fails too; +inf is allowed where Python allows it (it drops everything)
             if v.is_nan() || v < 0.0 {
@@ -486,9 +498,13 @@ pub fn vectorise_class(
         }
         return out;
     }
+    let ridge = p.ridge_classes.contains(&k);
     for (path, line) in branches::skeleton_branches(&mask, frame, p.min_length, p.through, p.spur) {
         let simple = simplify::simplify_line(&line, p.simplify);
         let pts = polyline::resample_polyline(&simple, p.num_points, false);
+        if ridge && edge::along_front_or_back_edge(&pts, frame.half_x, p.edge_margin, p.edge_span) {
+            continue;
+        }
         out.push(k, score(&path), pts);
     }
     out
@@ -557,6 +573,10 @@ mod tests {
             },
             VectoriseParams {
                 corner_tolerance: -1.0,
+                ..p.clone()
+            },
+            VectoriseParams {
+                edge_margin: f64::NAN,
                 ..p.clone()
             },
         ] {
