@@ -7,7 +7,11 @@
  * before that frame's source index, drawn with their final shapes (icmapper.vis.replay). A city
  * (kind "city") holds its drives in D.drives ({name, index, frames, dets} each): a drive selector
  * picks the drive whose frames the slider moves through; the city map and the city's ground truth
- * are drawn whole at every frame (bookkeeping frames do not compare across drives).
+ * are drawn whole at every frame (bookkeeping frames do not compare across drives). A city with
+ * an update holds its latest change report in D.changes (icmapper.vis.viewer.changes_block): the
+ * "changes" layer draws them over the map, removed red, added green, moved orange (a move's
+ * stored part thin and dashed), map errors (cause "map", reported, not applied) in short dashes;
+ * while it is on, the map is drawn grey (unchanged), as in the report's picture.
  *
  * window.icmapperViewer (for tests and scripts):
  *   ready            true once the first frame is drawn
@@ -21,13 +25,16 @@
  *                    are skipped; `drawn` counts them all)
  *   drawnGt          {class name: ground-truth instances drawn}
  *   drawnDetections  {class name: predictions of the current frame drawn}
+ *   drawnChanges     {added, removed, moved: changes drawn} (the "changes" layer, classes
+ *                    applied; all 0 without a change report)
  *   selected         null, or {id, cls, className, observations, firstFrame, lastFrame,
  *                    cdToGt (m or null), points}
  *   lastDrawMs       duration of the last draw (JavaScript time of issuing it)
  *   drawTimes        durations of the last 240 draws (ms)
  *   setFrame(t)      moves the slider to frame t and draws
  *   select(id)       selects the map instance with this id (null: none); returns `selected`
- *   toggle(name, on) layer "map" | "gt" | "dets" | "path" | "labels" | "follow", or a class name
+ *   toggle(name, on) layer "map" | "gt" | "dets" | "path" | "labels" | "follow" | "changes", or
+ *                    a class name
  *   anchor(id)       a world point [x, y] on the instance (its middle vertex)
  *   toClient(x, y)   page (client) coordinates [px, py] of a world point
  *   fit()            fits the view to the map, ground truth and path
@@ -166,11 +173,42 @@
   const indexOfId = new Map();
   for (let i = 0; i < NM; i++) indexOfId.set(M.id[i], i);
 
+  // The latest update's changes (a city): per change type and cause, per class, one path of
+  // the geometry after the change and one of a move's stored part.
+  const CH = D.changes || null;
+  const CHANGE_TYPES = ["removed", "added", "moved"];
+  const UNCHANGED = "#b8b8b8"; // the map's colour while the changes are shown
+  const changePaths = {}; // type -> {road: [Path2D per class], map: [...], before: [...]}
+  const changeCount = {}; // type -> [count per class]
+  if (CH) {
+    CHANGE_TYPES.forEach((t) => {
+      changePaths[t] = { road: [], map: [], before: [] };
+      changeCount[t] = [];
+      for (let c = 0; c < NC; c++) {
+        changePaths[t].road.push(new Path2D());
+        changePaths[t].map.push(new Path2D());
+        changePaths[t].before.push(new Path2D());
+        changeCount[t].push(0);
+      }
+    });
+    for (let k = 0; k < CH.change.length; k++) {
+      const t = CH.change[k], c = CH.cls[k];
+      if (!(t in changePaths)) continue;
+      const road = CH.cause[k] === "road";
+      addPolyline(changePaths[t][road ? "road" : "map"][c], CH.xy, CH.start[k], CH.start[k + 1],
+        CH.closed[k] === 1, 0);
+      addPolyline(changePaths[t].before[c], CH.beforeXy, CH.beforeStart[k],
+        CH.beforeStart[k + 1], false, 0);
+      changeCount[t][c]++;
+    }
+  }
+
   // ------------------------------------------------------------------ state
   const state = {
     frame: T - 1,
     classOn: D.classes.map(() => true),
-    layers: { map: true, gt: !!D.gt, dets: !!D.dets, path: !!poses, labels: true, follow: false },
+    layers: { map: true, gt: !!D.gt, dets: !!D.dets, path: !!poses, labels: true, follow: false,
+      changes: !!CH },
     view: { cx: 0, cy: 0, scale: 1 }, // world point at the canvas centre, pixels per metre
     selected: -1,
     playing: null,
@@ -178,7 +216,8 @@
   const api = {
     ready: false, numFrames: T, frame: state.frame, frameIndex: frameIndex[state.frame] || 0,
     drive: CITY ? 0 : null,
-    drawn: {}, drawnGt: {}, drawnDetections: {}, selected: null, lastDrawMs: 0, drawTimes: [],
+    drawn: {}, drawnGt: {}, drawnDetections: {}, drawnChanges: {}, selected: null, lastDrawMs: 0,
+    drawTimes: [],
   };
   window.icmapperViewer = api;
 
@@ -348,10 +387,11 @@
     const culled = (vx1 - vx0) * (vy1 - vy0) < CULL_BELOW * mapArea;
     const inView = culled ? viewPaths(vx0, vy0, vx1, vy1, limit, level) : null;
     let nInView = 0;
+    const changesOn = state.layers.changes && CH; // the map grey under the changes
     for (let c = 0; c < NC; c++) {
       let n = 0;
       if (state.layers.map && state.classOn[c]) {
-        ctx.strokeStyle = D.colours[c];
+        ctx.strokeStyle = changesOn ? UNCHANGED : D.colours[c];
         for (const b of buckets[c]) {
           if (b.first > limit) break;
           if (!culled) ctx.stroke(bucketPath(b, level));
@@ -363,6 +403,30 @@
     }
     api.level = LOD_STEPS[level];
     api.drawnInView = nInView;
+
+    const drawnCh = { removed: 0, added: 0, moved: 0 };
+    if (state.layers.changes && CH) {
+      for (const t of CHANGE_TYPES) {
+        const colour = CH.colours[t];
+        for (let c = 0; c < NC; c++) {
+          if (!state.classOn[c] || !changeCount[t][c]) continue;
+          drawnCh[t] += changeCount[t][c];
+          ctx.strokeStyle = colour;
+          if (t === "moved") { // the stored part it replaced: thin, dashed
+            ctx.lineWidth = 1.5 * px;
+            ctx.setLineDash([4 * px, 3 * px]);
+            ctx.stroke(changePaths[t].before[c]);
+          }
+          ctx.lineWidth = 3.5 * px;
+          ctx.setLineDash([]);
+          ctx.stroke(changePaths[t].road[c]);
+          ctx.setLineDash([1.5 * px, 3 * px]); // map errors: reported, not applied
+          ctx.stroke(changePaths[t].map[c]);
+          ctx.setLineDash([]);
+        }
+      }
+    }
+    api.drawnChanges = drawnCh;
 
     if (state.selected >= 0 && visibleInstance(state.selected)) {
       const p = instancePath(state.selected);
@@ -481,6 +545,25 @@
     if (D.dets) add("labels", "track ids", null, true, { "data-layer": "labels" });
     if (poses) add("path", "ego path", null, true, { "data-layer": "path" });
     if (poses) add("follow", "follow the ego", null, false, { "data-layer": "follow" });
+    if (CH) {
+      add("changes", "changes of update " + CH.update + " (" + CH.change.length + ")", null, true,
+        { "data-layer": "changes" });
+      CHANGE_TYPES.forEach((t) => {
+        const road = CH.change.filter((x, k) => x === t && CH.cause[k] === "road").length;
+        const all = CH.change.filter((x) => x === t).length;
+        const row = document.createElement("div");
+        row.className = "muted";
+        row.setAttribute("data-change", t);
+        row.style.marginLeft = "24px";
+        const s = document.createElement("span");
+        s.className = "swatch";
+        s.style.background = CH.colours[t];
+        row.appendChild(s);
+        row.appendChild(document.createTextNode(" " + t + ": " + road + " applied" +
+          (all > road ? ", " + (all - road) + " map error(s)" : "")));
+        box.appendChild(row);
+      });
+    }
   }
 
   function buildMetrics() {
@@ -590,6 +673,7 @@
     };
     take(M.xy);
     if (D.gt) take(D.gt.xy);
+    if (CH) take(CH.xy);
     if (poses) take(poses.flatMap((p) => [p[0], p[1]]));
     if (!isFinite(x0)) { x0 = -50; y0 = -50; x1 = 50; y1 = 50; }
     return [x0, y0, x1, y1];

@@ -236,12 +236,52 @@ def viewer_data(replay: RunReplay, thumbnails: bool = True) -> dict[str, Any]:
     return data
 
 
+#: Colours of the changes layer (the change report's picture: ``changes_report.CHANGE_COLOURS``).
+CHANGE_HEX = {"removed": "#d62728", "added": "#2ca02c", "moved": "#ff8c00"}
+
+
+def changes_block(path: str | os.PathLike) -> dict[str, Any]:
+    """The viewer's layer of a city update's change report (``changes.geojson``, see
+    ``city.changes_report``): per change its type (added | removed | moved), class, map
+    instance, cause (road | map) and geometry (a removal: the removed instance; a move: the
+    moved part, ``before`` the stored part it replaced; an addition: the new instance), flat as
+    the map's. ValueError naming the file when it is not a change report."""
+    from icmapper.city.changes_report import read_changes
+
+    path = Path(path)
+    records = read_changes(path)
+    raw = json.loads(path.read_text(encoding="utf-8"))
+    update = {int(f["properties"].get("update", -1)) for f in raw["features"]}
+    before = []
+    for f in raw["features"]:
+        b = f["properties"].get("before")
+        before.append(np.asarray(b, np.float64).reshape(-1, 2) if b else np.zeros((0, 2)))
+    start, xy = _flat([r["points"] for r in records])
+    b_start, b_xy = _flat(before)
+    return {
+        "update": max(update) if update else None,
+        "change": [r["change"] for r in records],
+        "cls": [r["cls"] for r in records],
+        "instance": [r["instance"] for r in records],
+        "cause": [r["cause"] for r in records],
+        "closed": [int(r["closed"]) for r in records],
+        "start": start,
+        "xy": xy,
+        "beforeStart": b_start,
+        "beforeXy": b_xy,
+        "colours": dict(CHANGE_HEX),
+    }
+
+
 def city_viewer_data(city: str | os.PathLike, with_source: bool = True) -> dict[str, Any]:
     """Everything the page shows for a city run folder (kind "city"): the city map (with each
     instance's distance to the nearest ground truth), the city's cross-drive ground truth and
     its CD / GAP (``with_source``: recomputed from the drives' sources), and per successful
     drive (``drives``: name, drive index, frames, predictions) what a run's page shows of its
-    one sequence; the page's drive selector picks one. No camera thumbnails."""
+    one sequence; the page's drive selector picks one. No camera thumbnails. A city with an
+    update (``changes.geojson``: the latest update's report) also gets ``changes``
+    (``changes_block``): the page draws them over the map (removed red, added green, moved
+    orange; map errors, reported but not applied, in short dashes) with a toggle."""
     from icmapper.city.manifest import CITY_MAP, read_manifest
     from icmapper.eval.runfmt import read_run
 
@@ -260,6 +300,7 @@ def city_viewer_data(city: str | os.PathLike, with_source: bool = True) -> dict[
         gt = city_gt(city_sequences(manifest), rng)
         gt_items = [(int(g.cls), np.asarray(g.points), bool(g.closed)) for g in gt]
     cd, gt_index = nearest_gt_chamfer(items, gt_items or [])
+    report = city / "changes.geojson"  # the latest update's changes
     drives = []
     for d in ok:
         seq = read_run(city / d.run).sequences[0]
@@ -285,6 +326,7 @@ def city_viewer_data(city: str | os.PathLike, with_source: bool = True) -> dict[
         "drives": drives,
         "metrics": _metrics(items, gt_items, manifest.range_name) if gt_items else None,
         "cameras": None,
+        "changes": changes_block(report) if report.is_file() else None,
     }
 
 
