@@ -2,7 +2,11 @@
 (nuScenes' 1600 x 900), by decoder candidate and by DataLoader worker count, against a naive
 Pillow open + full decode + resize baseline measured in the same run.
 
-    python -m benchmarks images [--seconds S] [--frames N]
+    python -m benchmarks images [--seconds S] [--frames N] [--workers 0 1 2 ... | auto]
+
+``--workers``: the DataLoader worker counts measured (default 0, 1, 2 and ``auto``: what
+``data.num_workers = -1`` resolves to on this machine, ``training.config.resolve_num_workers``);
+on a many-core GPU machine pass e.g. ``--workers 0 4 8 15 auto``.
 
 Candidates (each gives (3, H, W) uint8 with the "fit" resize of ``icmapper.data.images``):
 naive Pillow; Pillow with ``draft`` (libjpeg DCT-scaled decode) + resize; simplejpeg with
@@ -144,11 +148,32 @@ def _loader_rate(fn, paths: list[Path], size, workers: int, frames: int) -> floa
     return n / (time.perf_counter() - t0)
 
 
+def worker_counts(items: list[str]) -> list[tuple[str, int]]:
+    """``--workers`` -> (label, DataLoader workers): integers as given, ``auto`` as
+    ``data.num_workers = -1`` resolves here (its label says to what). SystemExit on anything
+    else."""
+    from icmapper.training.config import resolve_num_workers
+
+    out = []
+    for item in items:
+        if item == "auto":
+            n = resolve_num_workers(-1)
+            out.append((f"auto ({n})", n))
+        elif item.isdigit():
+            out.append((item, int(item)))
+        else:
+            raise SystemExit(f"--workers: expected integers >= 0 or auto, got {item!r}")
+    return out
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m benchmarks images", description=__doc__)
     ap.add_argument("--seconds", type=float, default=3.0, help="per decoder and size")
     ap.add_argument("--frames", type=int, default=24, help="frames per DataLoader run")
+    ap.add_argument("--workers", nargs="+", default=["0", "1", "2", "auto"],
+                    help="DataLoader worker counts (integers >= 0, or auto)")  # fmt: skip
     args = ap.parse_args(argv)
+    counts = worker_counts(args.workers)
     import torch
 
     torch.set_num_threads(1)
@@ -176,10 +201,10 @@ def main(argv: list[str] | None = None) -> int:
                 base = base or r
                 print(f"  {name:<40} {r:7.2f}  ({r / base:.2f}x)")
             print(f"-> {size[0]}x{size[1]}, DataLoader workers, frames/s (ratio to naive)")
-            for workers in (0, 1, 2):
+            for label, workers in counts:
                 rn = _loader_rate(naive, paths, size, workers, args.frames)
                 rs = _loader_rate(simplejpeg_fast, paths, size, workers, args.frames)
-                print(f"  workers={workers}: naive {rn:6.2f}  icmapper {rs:6.2f}  ({rs / rn:.2f}x)")
+                print(f"  workers={label}: naive {rn:6.2f}  icmapper {rs:6.2f}  ({rs / rn:.2f}x)")
     return 0
 
 

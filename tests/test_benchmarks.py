@@ -156,3 +156,17 @@ def test_pipeline_bench_runs_one_frame(capsys: pytest.CaptureFixture[str]) -> No
     for stage in ("detector", "vectorise", "association", "tracking", "fusion", "merge"):
         assert any(line.split()[:1] == [stage] for line in out.splitlines()), stage
     assert "frames/s" in out
+
+
+def test_images_bench_worker_counts() -> None:
+    """``python -m benchmarks images --workers``: integers as given, ``auto`` as
+    ``data.num_workers = -1`` resolves on this machine, anything else refused."""
+    from icmapper.training.config import resolve_num_workers
+
+    from benchmarks import images
+
+    auto = resolve_num_workers(-1)
+    got = images.worker_counts(["0", "8", "auto"])
+    assert got == [("0", 0), ("8", 8), (f"auto ({auto})", auto)]
+    with pytest.raises(SystemExit, match="got '-1'"):
+        images.worker_counts(["-1"])
