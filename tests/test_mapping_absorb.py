@@ -129,6 +129,30 @@ def test_map_nms_on_a_hand_made_map() -> None:
     assert map_nms(gm, MapperConfig()) == 0  # nothing left to absorb
 
 
+def test_boundaries_absorb_with_their_own_wider_gate() -> None:
+    """A kerb seen twice 1.3 m apart is one kerb (``absorb_boundary_gate`` 1.5 m); two dividers
+    1.3 m apart stay two (``absorb_gate`` 1 m); with the boundary gate at 1 m both stay."""
+    from icmapper import GlobalMap
+    from icmapper.mapping.absorb import absorb_pairs
+
+    def two(cls: int) -> tuple[GlobalMap, list[int]]:
+        gm = GlobalMap()
+        ids = [gm.insert(cls, line(0, 40, 0).astype(np.float64)),
+               gm.insert(cls, line(5, 25, 1.3).astype(np.float64))]  # fmt: skip
+        return gm, ids
+
+    gm, (kerb, view) = two(2)
+    assert absorb_pairs(gm, [view], MapperConfig()) == [(view, kerb)]
+    assert [int(i) for i in gm.ids()] == [kerb]
+    gm, (a, b) = two(1)
+    assert absorb_pairs(gm, [b], MapperConfig()) == []
+    gm, (kerb, view) = two(2)
+    assert absorb_pairs(gm, [view], MapperConfig(absorb_boundary_gate=1.0)) == []
+    assert len(gm) == 2
+    with pytest.raises(ValueError, match="absorb_boundary_gate"):
+        MapperConfig(absorb_boundary_gate=0.0)
+
+
 def _three(seq: Sequence) -> Sequence:
     """The first three frames of ``seq``."""
     return replace(seq, timestamps=seq.timestamps[:3], poses=seq.poses[:3])

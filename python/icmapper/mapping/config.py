@@ -47,6 +47,11 @@ class MapperConfig:
         "metres; absorption (IC-Mapper's absorb, every method's map_nms): a point within this "
         "gate of a same-class neighbour lies on it",
     )
+    absorb_boundary_gate: float = _f(
+        1.5,
+        "metres; absorb_gate of boundaries (two views of one kerb lie up to 1.5 m apart in the "
+        "coarse BEV, two kerbs of a road farther)",
+    )
     absorb_overlap: float = _f(
         0.5, "absorption: share of an instance's points lying on a neighbour to join the two"
     )
@@ -126,7 +131,8 @@ class MapperConfig:
             raise ValueError("MapperConfig.track_threshold must be >= detect_threshold")
         for name in ("positional_scale", "spacing", "history_points", "gate", "splice_overlap",
                      "vma_overlap", "cluster_eps", "polymerge_buffer", "city_gate",
-                     "city_tolerance", "absorb_tolerance", "absorb_gate"):  # fmt: skip
+                     "city_tolerance", "absorb_tolerance", "absorb_gate",
+                     "absorb_boundary_gate"):  # fmt: skip
             if not getattr(self, name) > 0:
                 raise ValueError(f"MapperConfig.{name} must be > 0, got {getattr(self, name)}")
         for name in ("min_hits", "cluster_min_samples"):

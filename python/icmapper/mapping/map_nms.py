@@ -4,7 +4,7 @@ With ``MapperConfig.map_nms`` the map a method returns at the end of a sequence 
 it is written and evaluated, in two steps:
 
 1. duplicates: every instance that lies on a same-class neighbour over most of its length becomes
-   part of it (``GlobalMap.absorb`` over every instance, with the ``absorb_*`` settings), as
+   part of it (``absorb.absorb_pairs`` over every instance, with the ``absorb_*`` settings), as
    GlobalMapNet's map NMS keeps one of overlapping global instances;
 2. stubs across lanes: a divider shorter than ``stub_length`` that crosses a longer divider at more
    than ``stub_angle`` degrees is removed (lane lines do not cross each other; such stubs are
@@ -33,10 +33,9 @@ DIVIDER = 1
 
 def map_nms(global_map: GlobalMap, config: MapperConfig) -> int:
     """Cleans the whole map in place (module docstring); returns how many instances went."""
-    ids = [int(i) for i in global_map.ids()]
-    pairs = global_map.absorb(
-        ids, config.absorb_gate, config.absorb_overlap, config.absorb_tolerance
-    )
+    from icmapper.mapping.absorb import absorb_pairs
+
+    pairs = absorb_pairs(global_map, [int(i) for i in global_map.ids()], config)
     stubs = stubs_across(global_map, config.stub_length, config.stub_angle)
     for i in stubs:
         global_map.remove(i)
