@@ -1,4 +1,5 @@
-"""Absorption in the online mapper (``MapperConfig.absorb``) and the map NMS offered to every
+"""Absorption in the online mapper (``MapperConfig.absorb``), the confirmation of new tracks
+(``min_hits``, ``confirm_score``) and the map NMS offered to every
 method (``MapperConfig.map_nms``): hand-made detections whose right map is known."""
 
 from __future__ import annotations
@@ -27,6 +28,7 @@ class Scripted:
 
     def __init__(self, frames: dict[int, list[tuple[int, np.ndarray]]]) -> None:
         self.frames = frames
+        self.score = 0.9
 
     def reset(self) -> None:
         pass
@@ -37,7 +39,7 @@ class Scripted:
             return Detections.empty()
         return Detections(
             classes=np.array([c for c, _ in items], np.int64),
-            scores=np.full(len(items), 0.9, np.float32),
+            scores=np.full(len(items), self.score, np.float32),
             points=np.stack([p for _, p in items]).astype(np.float32),
         )
 
@@ -173,3 +175,24 @@ def test_map_nms_removes_stubs_across_lanes_only() -> None:
     assert stubs_across(gm, 0.0, 45.0) == []  # off
     assert map_nms(gm, MapperConfig()) == 1
     assert sorted(int(i) for i in gm.ids()) == sorted([lane, slant, long_, kerb, apart])
+
+
+def test_a_confident_first_sighting_enters_the_map_at_once(still: Sequence) -> None:
+    """``confirm_score``: with ``min_hits`` 2 a divider seen in one frame only enters the map when
+    its score reaches ``confirm_score``; a weaker one stays tentative (kept out)."""
+    once = {1: [(1, line(-25, 25, 2.0))]}
+
+    def mapped(score: float, confirm: float) -> int:
+        src = Scripted(once)
+        src.score = score
+        m = Mapper(src, config=MapperConfig(min_hits=2, confirm_score=confirm))
+        m.reset()
+        for i in range(3):
+            m.step(still.frame(i, with_images=False))
+        return len(m.global_map)
+
+    assert mapped(0.9, 0.7) == 1
+    assert mapped(0.6, 0.7) == 0
+    assert mapped(0.9, 1.0) == 0  # the former rule: min_hits frames for everyone
+    with pytest.raises(ValueError, match="confirm_score"):
+        MapperConfig(confirm_score=1.5)

@@ -75,6 +75,9 @@ class MapperConfig:
     track_threshold: float = _f(0.4, "score of detections tracked, fused and merged into the map")
     assoc_threshold: float = _f(0.5, "θ: minimum association score of a match")
     min_hits: int = _f(2, "frames a new track must be seen before it enters the global map")
+    confirm_score: float = _f(
+        0.7, "detection score at which a new track enters the global map at once (min_hits: 1)"
+    )
     reid_distance: float = _f(1.0, "metres; re-identification against the map (0: off)")
     reid_overlap: float = _f(
         0.5, "share of a new track's points within reid_distance of an instance to take its id"
@@ -123,7 +126,7 @@ class MapperConfig:
 
     def __post_init__(self) -> None:
         for name in ("detect_threshold", "track_threshold", "assoc_threshold",
-                     "baseline_threshold"):  # fmt: skip
+                     "baseline_threshold", "confirm_score"):  # fmt: skip
             v = getattr(self, name)
             if not 0.0 <= v <= 1.0:
                 raise ValueError(f"MapperConfig.{name} must be in [0, 1], got {v}")

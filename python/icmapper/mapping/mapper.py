@@ -20,8 +20,9 @@ Per frame (paper Fig. 2):
    covers, by ``fused_merge``, since fusion already combined it with the history; an unfused one
    by curve fit; crossings by ``crossing_merge``: the running mean of complete views, union of
    views cut by the range edge that reveal more of a crossing), or insert once the
-   track has been seen in ``min_hits`` frames (tentative tracks keep one-off false positives out
-   of the map; an extension like step 3);
+   track has been seen in ``min_hits`` frames or scores ``confirm_score`` (tentative tracks keep
+   one-off false positives out of the map, a confident first sighting goes in; an extension like
+   step 3);
 7. absorption (``absorb``, an extension): an instance this step inserted or merged into and a
    same-class neighbour it lies on over most of its length become one (``GlobalMap.absorb``); the
    tracks of the absorbed instance map into the kept one. Pieces of one line that the tracker
@@ -371,6 +372,7 @@ class Mapper:
             self._alias,
             self.config,
             classes=det.classes,
+            scores=det.scores,
             track_ids=track_ids,
             fused=fused,
             was_fused=was_fused,

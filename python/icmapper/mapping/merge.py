@@ -6,7 +6,9 @@ into the global map by the rule for what it is.
   (``mapping.passed``), spliced in when fusion already combined it with the history
   (``mapping.splice``, ``fused_merge = "splice"``), merged by curve fit otherwise (collected and
   run in one parallel ``merge_many`` call: the same map as merging in order);
-- a new instance: inserted once its track has been seen in ``min_hits`` frames.
+- a new instance: inserted once its track has been seen in ``min_hits`` frames, or at once when
+  its detection scores at least ``confirm_score`` (a confident first sighting is not held back:
+  an instance in range in a single keyframe would never enter the map).
 
 Rejected geometry is reported to ``on_failure`` and skipped. The map, the crossing rule and the
 tracker's points change in place; the caller owns them. No I/O.
@@ -43,6 +45,7 @@ def merge_frame(
     config: MapperConfig,
     *,
     classes: NDArray[np.int64],
+    scores: NDArray[np.float32],
     track_ids: NDArray[np.int64],
     fused: NDArray[np.float32],
     was_fused: NDArray[np.bool_],
@@ -50,9 +53,10 @@ def merge_frame(
     frame_index: int,
     on_failure: FailureSink,
 ) -> tuple[list[int], list[int]]:
-    """Merges the m tracked detections of one frame (classes (m,), track ids (m,), points
-    ``fused`` (m, P, 2) ego, ``was_fused`` (m,)) at ``pose`` (4, 4) ego->world; ``alias`` maps a
-    track id to the instance it merges into. Returns the instance ids inserted and merged into."""
+    """Merges the m tracked detections of one frame (classes (m,), scores (m,), track ids (m,),
+    points ``fused`` (m, P, 2) ego, ``was_fused`` (m,)) at ``pose`` (4, 4) ego->world; ``alias``
+    maps a track id to the instance it merges into. Returns the instance ids inserted and merged
+    into."""
     inserted: list[int] = []
     merged: list[int] = []
     # Inserts and crossing merges now (a later detection of this frame may merge into a new
@@ -96,7 +100,7 @@ def merge_frame(
             )
             commit(tid, target, world, change)
             continue
-        if tracker.track(tid).hits < config.min_hits:
+        if tracker.track(tid).hits < config.min_hits and scores[j] < config.confirm_score:
             continue  # tentative track: not in the map until confirmed
         try:
             global_map.insert_with_id(tid, int(classes[j]), world, frame=frame_index)
