@@ -3,7 +3,10 @@
 //!
 //! Run: `cargo bench -p icmap-geom --bench store` (add `-- --quick` for a fast pass).
 
-use criterion::{black_box, criterion_group, criterion_main, BenchmarkId, Criterion};
+use criterion::measurement::WallTime;
+use criterion::{
+    black_box, criterion_group, criterion_main, BenchmarkGroup, BenchmarkId, Criterion,
+};
 use icmap_geom::{
     chamfer_matrix, merge_polyline, GlobalMap, MapClass, MapConfig, Patch, Point, Pose2,
 };
@@ -71,12 +74,18 @@ fn patches(k: usize, extent: f64, margin: f64, seed: u64) -> Vec<Patch> {
         .collect()
 }
 
-fn bench_store(c: &mut Criterion) {
-    let mut group = c.benchmark_group("store");
+/// A benchmark group of 10 samples, 0.3 s warm-up and 1 s of measurement.
+fn quick_group<'a>(c: &'a mut Criterion, name: &str) -> BenchmarkGroup<'a, WallTime> {
+    let mut group = c.benchmark_group(name);
     group
         .sample_size(10)
         .warm_up_time(Duration::from_millis(300))
         .measurement_time(Duration::from_secs(1));
+    group
+}
+
+fn bench_store(c: &mut Criterion) {
+    let mut group = quick_group(c, "store");
     for n in [1_000usize, 100_000] {
         let (map, extent) = synthetic_map(n, 7);
         let q = patches(64, extent, 0.0, 11);
@@ -104,11 +113,7 @@ fn bench_store(c: &mut Criterion) {
 }
 
 fn bench_geometry(c: &mut Criterion) {
-    let mut group = c.benchmark_group("geometry");
-    group
-        .sample_size(10)
-        .warm_up_time(Duration::from_millis(300))
-        .measurement_time(Duration::from_secs(1));
+    let mut group = quick_group(c, "geometry");
     // A 40 m global polyline (1 m spacing) and a 20 m detection overlapping its last 10 m.
     let global: Vec<Point> = (0..=40)
         .map(|k| Point::new(k as f64, 0.02 * (k as f64 * 0.3).sin()))

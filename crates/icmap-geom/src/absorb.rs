@@ -138,7 +138,7 @@ impl GlobalMap {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::test_util::{map, rect};
+    use crate::test_util::{add, map, rect};
     use crate::types::{MapClass, Point};
 
     fn line(x0: f64, x1: f64, y: f64) -> Vec<Point> {
@@ -163,12 +163,8 @@ mod tests {
     #[test]
     fn a_stub_on_a_long_line_is_absorbed_into_it() {
         let mut m = map();
-        let long = m
-            .insert(MapClass::Divider, &line(0.0, 50.0, 0.0), 0)
-            .unwrap();
-        let stub = m
-            .insert(MapClass::Divider, &line(20.0, 26.0, 0.3), 3)
-            .unwrap();
+        let long = add(&mut m, MapClass::Divider, &line(0.0, 50.0, 0.0), 0);
+        let stub = add(&mut m, MapClass::Divider, &line(20.0, 26.0, 0.3), 3);
         let out = m.absorb(&[stub], params()).unwrap();
         assert_eq!(out, vec![(stub, long)]);
         assert!(!m.contains(stub));
@@ -185,15 +181,9 @@ mod tests {
     #[test]
     fn neighbours_beyond_the_gate_or_of_another_class_stay() {
         let mut m = map();
-        let a = m
-            .insert(MapClass::Divider, &line(0.0, 50.0, 0.0), 0)
-            .unwrap();
-        let b = m
-            .insert(MapClass::Divider, &line(0.0, 50.0, 3.5), 0)
-            .unwrap(); // next lane
-        let c = m
-            .insert(MapClass::Boundary, &line(0.0, 50.0, 0.2), 0)
-            .unwrap();
+        let a = add(&mut m, MapClass::Divider, &line(0.0, 50.0, 0.0), 0);
+        let b = add(&mut m, MapClass::Divider, &line(0.0, 50.0, 3.5), 0); // next lane
+        let c = add(&mut m, MapClass::Boundary, &line(0.0, 50.0, 0.2), 0);
         let out = m.absorb(&[a, b, c], params()).unwrap();
         assert!(out.is_empty());
         assert_eq!(m.len(), 3);
@@ -202,12 +192,8 @@ mod tests {
     #[test]
     fn pieces_overlapping_over_most_of_one_join() {
         let mut m = map();
-        let a = m
-            .insert(MapClass::Boundary, &line(0.0, 20.0, 0.0), 0)
-            .unwrap();
-        let b = m
-            .insert(MapClass::Boundary, &line(8.0, 26.0, 0.1), 1)
-            .unwrap(); // 13 of 19 on `a`
+        let a = add(&mut m, MapClass::Boundary, &line(0.0, 20.0, 0.0), 0);
+        let b = add(&mut m, MapClass::Boundary, &line(8.0, 26.0, 0.1), 1); // 13 of 19 on `a`
         let out = m.absorb(&[b], params()).unwrap();
         assert_eq!(out.len(), 1);
         assert_eq!(m.len(), 1);
@@ -223,20 +209,12 @@ mod tests {
     #[test]
     fn chains_are_followed_and_overlapping_crossings_union() {
         let mut m = map();
-        let big = m
-            .insert(MapClass::PedCrossing, &rect(0.0, 0.0, 6.0, 2.0), 0)
-            .unwrap();
-        let small = m
-            .insert(MapClass::PedCrossing, &rect(1.0, 0.0, 2.0, 1.5), 1)
-            .unwrap();
-        let far = m
-            .insert(MapClass::PedCrossing, &rect(30.0, 0.0, 6.0, 2.0), 1)
-            .unwrap();
+        let big = add(&mut m, MapClass::PedCrossing, &rect(0.0, 0.0, 6.0, 2.0), 0);
+        let small = add(&mut m, MapClass::PedCrossing, &rect(1.0, 0.0, 2.0, 1.5), 1);
+        let far = add(&mut m, MapClass::PedCrossing, &rect(30.0, 0.0, 6.0, 2.0), 1);
         // a crossing overlapping `big`'s edge by 5 cm (a neighbour at an intersection): more
         // than half of its outline within the gate of `big`'s, less than half inside it
-        let beside = m
-            .insert(MapClass::PedCrossing, &rect(0.0, 2.7, 6.0, 0.75), 1)
-            .unwrap();
+        let beside = add(&mut m, MapClass::PedCrossing, &rect(0.0, 2.7, 6.0, 0.75), 1);
         let out = m.absorb(&[small, far, beside], params()).unwrap();
         assert_eq!(out, vec![(small, big)]);
         assert!(m.contains(far) && m.contains(big) && m.contains(beside));
@@ -246,8 +224,12 @@ mod tests {
         let ids: Vec<u64> = (0..3)
             .map(|i| {
                 let x = 5.0 * i as f64; // 8 of 13 points on the neighbour
-                m.insert(MapClass::Divider, &line(x, x + 12.0, 0.05 * i as f64), 0)
-                    .unwrap()
+                add(
+                    &mut m,
+                    MapClass::Divider,
+                    &line(x, x + 12.0, 0.05 * i as f64),
+                    0,
+                )
             })
             .collect();
         let out = m.absorb(&ids, params()).unwrap();
@@ -259,11 +241,9 @@ mod tests {
     fn an_unfaithful_merge_keeps_both_and_bad_parameters_are_errors() {
         let mut m = map();
         // an L: the short leg overlaps the long leg's corner only over the gate's reach
-        let a = m
-            .insert(MapClass::Boundary, &line(0.0, 30.0, 0.0), 0)
-            .unwrap();
+        let a = add(&mut m, MapClass::Boundary, &line(0.0, 30.0, 0.0), 0);
         let leg: Vec<Point> = (0..=20).map(|i| Point::new(30.0, i as f64)).collect();
-        let b = m.insert(MapClass::Boundary, &leg, 0).unwrap();
+        let b = add(&mut m, MapClass::Boundary, &leg, 0);
         let out = m.absorb(&[a, b], params_of(1.0, 0.04, 0.2)).unwrap();
         assert!(out.is_empty(), "{out:?}");
         assert_eq!(m.len(), 2);

@@ -145,8 +145,37 @@ pub(crate) fn open_ring(ring: &[Point]) -> &[Point] {
     }
 }
 
+/// A 2-D point type the ring helpers read: its coordinates.
+pub(crate) trait Xy: Copy {
+    fn xy(self) -> (f64, f64);
+}
+
+impl Xy for Point {
+    #[inline]
+    fn xy(self) -> (f64, f64) {
+        (self.x, self.y)
+    }
+}
+
+/// Whether `p` lies inside `ring` (ray casting, even-odd rule; a ring without a repeated point,
+/// `p` well away from its boundary for a sure answer).
+pub(crate) fn inside_ring<T: Xy>(p: T, ring: &[T]) -> bool {
+    let (px, py) = p.xy();
+    let n = ring.len();
+    let mut inside = false;
+    let mut j = n - 1;
+    for i in 0..n {
+        let ((ax, ay), (bx, by)) = (ring[i].xy(), ring[j].xy());
+        if (ay > py) != (by > py) && px < (bx - ax) * (py - ay) / (by - ay) + ax {
+            inside = !inside;
+        }
+        j = i;
+    }
+    inside
+}
+
 /// Twice the signed area of a ring (positive when counter-clockwise).
-pub(crate) fn signed_area2(ring: &[Point]) -> f64 {
+pub fn signed_area2(ring: &[Point]) -> f64 {
     let n = ring.len();
     (0..n)
         .map(|i| {

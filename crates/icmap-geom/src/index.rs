@@ -195,6 +195,7 @@ impl SpatialIndex {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::test_util::query_boxes;
     use crate::types::Point;
     use proptest::prelude::*;
 
@@ -317,8 +318,7 @@ mod tests {
         #![proptest_config(ProptestConfig::with_cases(64))]
         #[test]
         fn query_equals_brute_force(ops in prop::collection::vec(op(), 1..400),
-                                    queries in prop::collection::vec(
-                                        (-120.0..120.0f64, -120.0..120.0f64, 0.0..60.0f64, 0.0..60.0f64), 8)) {
+                                    queries in query_boxes(120.0, 60.0, 8)) {
             let mut idx = SpatialIndex::new();
             for (i, o) in ops.iter().enumerate() {
                 match *o {

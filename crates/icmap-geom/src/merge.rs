@@ -22,7 +22,7 @@ fn fit_or_polyline(points: &[Point], s: f64, spacing: f64) -> Result<Vec<Point>>
     }
 }
 use crate::resample::{cumulative_lengths, dedup_cow, resample_spacing};
-use crate::types::{validate_points, Point};
+use crate::types::{check_non_negative, check_positive, validate_points, Point};
 use crate::union::polygon_union_two;
 use nalgebra::Vector2;
 
@@ -266,18 +266,8 @@ pub fn merge_polyline(
 ) -> Result<Vec<Point>> {
     validate_points(global, 2, "global polyline")?;
     validate_points(detected, 2, "detected polyline")?;
-    if !(s.is_finite() && s >= 0.0) {
-        return Err(GeomError::InvalidParameter {
-            name: "s",
-            reason: format!("must be finite and >= 0, got {s}"),
-        });
-    }
-    if !(spacing.is_finite() && spacing > 0.0) {
-        return Err(GeomError::InvalidParameter {
-            name: "spacing",
-            reason: format!("must be finite and > 0, got {spacing}"),
-        });
-    }
+    check_non_negative("s", s)?;
+    check_positive("spacing", spacing)?;
     let g = dedup_cow(global, DEDUP_EPS, false);
     let mut d = dedup_cow(detected, DEDUP_EPS, false).into_owned();
     // (After `dedup`, a polyline of 3 or more points is longer than the tolerance: its first two
@@ -386,12 +376,7 @@ fn convex_hull(points: &[Point]) -> Vec<Point> {
 /// If one ring has no area, the union is the other one. Errors on rings with fewer than 3 points,
 /// non-finite input, a non-positive `spacing`, or when both rings have no area.
 pub fn merge_polygon(global: &[Point], detected: &[Point], spacing: f64) -> Result<Vec<Point>> {
-    if !(spacing.is_finite() && spacing > 0.0) {
-        return Err(GeomError::InvalidParameter {
-            name: "spacing",
-            reason: format!("must be finite and > 0, got {spacing}"),
-        });
-    }
+    check_positive("spacing", spacing)?;
     let union = polygon_union_two(global, detected)?;
     let ring = match union.len() {
         0 => {
@@ -422,7 +407,16 @@ mod tests {
             .collect()
     }
 
-    fn check(out: &[Point], first: Point, last: Point, tol: f64) {
+    /// Merges `detected` into `global` (s = 0.5, spacing 1 m) and checks the result: it runs from
+    /// `first` to `last` (within `tol`), monotone along that direction, points about 1 m apart.
+    fn check_merge(
+        global: &[Point],
+        detected: &[Point],
+        first: Point,
+        last: Point,
+        tol: f64,
+    ) -> Vec<Point> {
+        let out = merge_polyline(global, detected, 0.5, 1.0).unwrap();
         assert!(
             (out[0] - first).norm() < tol,
             "first {:?} vs {:?}",
@@ -440,38 +434,25 @@ mod tests {
         assert!(out
             .windows(2)
             .all(|w| (w[1] - w[0]).dot(&dir) > 0.5 && (w[1] - w[0]).norm() <= 1.0 + 1e-6));
+        out
     }
 
     #[test]
     fn partial_overlap_at_end_and_start() {
         let g = line(0.0, 10.0, 0.0);
-        check(
-            &merge_polyline(&g, &line(8.0, 15.0, 0.1), 0.5, 1.0).unwrap(),
-            p(0.0, 0.0),
-            p(15.0, 0.1),
-            0.3,
-        );
-        check(
-            &merge_polyline(&g, &line(-5.0, 2.0, 0.1), 0.5, 1.0).unwrap(),
-            p(-5.0, 0.1),
-            p(10.0, 0.0),
-            0.3,
-        );
+        check_merge(&g, &line(8.0, 15.0, 0.1), p(0.0, 0.0), p(15.0, 0.1), 0.3);
+        check_merge(&g, &line(-5.0, 2.0, 0.1), p(-5.0, 0.1), p(10.0, 0.0), 0.3);
     }
 
     #[test]
     fn reversed_detection() {
         let g = line(0.0, 10.0, 0.0);
-        check(
-            &merge_polyline(&g, &line(15.0, 8.0, 0.1), 0.5, 1.0).unwrap(),
-            p(0.0, 0.0),
-            p(15.0, 0.1),
-            0.3,
-        );
+        check_merge(&g, &line(15.0, 8.0, 0.1), p(0.0, 0.0), p(15.0, 0.1), 0.3);
         // The global direction is kept when the global runs the other way.
         let g_rev = line(10.0, 0.0, 0.0);
-        check(
-            &merge_polyline(&g_rev, &line(8.0, 15.0, 0.1), 0.5, 1.0).unwrap(),
+        check_merge(
+            &g_rev,
+            &line(8.0, 15.0, 0.1),
             p(15.0, 0.1),
             p(0.0, 0.0),
             0.3,
@@ -536,33 +517,27 @@ mod tests {
     #[test]
     fn containment_both_ways() {
         let g = line(0.0, 10.0, 0.0);
-        let out = merge_polyline(&g, &line(3.0, 7.0, 0.2), 0.5, 1.0).unwrap();
-        check(&out, p(0.0, 0.0), p(10.0, 0.0), 0.3);
+        let out = check_merge(&g, &line(3.0, 7.0, 0.2), p(0.0, 0.0), p(10.0, 0.0), 0.3);
         // The detection replaces the overlapped part: the middle follows it.
         let mid = out
             .iter()
             .min_by(|a, b| (a.x - 5.0).abs().total_cmp(&(b.x - 5.0).abs()))
             .unwrap();
         assert!(mid.y > 0.1, "{mid:?}");
-        let out = merge_polyline(&line(3.0, 7.0, 0.0), &line(-5.0, 15.0, 0.1), 0.5, 1.0).unwrap();
-        check(&out, p(-5.0, 0.1), p(15.0, 0.1), 0.3);
+        check_merge(
+            &line(3.0, 7.0, 0.0),
+            &line(-5.0, 15.0, 0.1),
+            p(-5.0, 0.1),
+            p(15.0, 0.1),
+            0.3,
+        );
     }
 
     #[test]
     fn continuation_with_gap_and_curve() {
         let g = line(0.0, 10.0, 0.0);
-        check(
-            &merge_polyline(&g, &line(13.0, 20.0, 0.0), 0.5, 1.0).unwrap(),
-            p(0.0, 0.0),
-            p(20.0, 0.0),
-            0.3,
-        );
-        check(
-            &merge_polyline(&g, &line(20.0, 13.0, 0.0), 0.5, 1.0).unwrap(),
-            p(0.0, 0.0),
-            p(20.0, 0.0),
-            0.3,
-        );
+        check_merge(&g, &line(13.0, 20.0, 0.0), p(0.0, 0.0), p(20.0, 0.0), 0.3);
+        check_merge(&g, &line(20.0, 13.0, 0.0), p(0.0, 0.0), p(20.0, 0.0), 0.3);
         // A quarter circle, the detection continuing it (reversed).
         let arc = |a0: f64, a1: f64| -> Vec<Point> {
             (0..=20)
@@ -587,8 +562,13 @@ mod tests {
         assert!(merge_polyline(&g, &g, 0.5, 0.0).is_err());
         // A zero-length detection is rejected; a zero-length global is replaced.
         assert!(merge_polyline(&g, &[p(5.0, 0.0), p(5.0, 0.0)], 0.5, 1.0).is_err());
-        let out = merge_polyline(&[p(1.0, 1.0), p(1.0, 1.0)], &g, 0.5, 1.0).unwrap();
-        check(&out, p(0.0, 0.0), p(10.0, 0.0), 1e-6);
+        check_merge(
+            &[p(1.0, 1.0), p(1.0, 1.0)],
+            &g,
+            p(0.0, 0.0),
+            p(10.0, 0.0),
+            1e-6,
+        );
     }
 
     fn rect(x0: f64, y0: f64, x1: f64, y1: f64) -> Vec<Point> {

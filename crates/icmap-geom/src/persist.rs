@@ -25,7 +25,8 @@
 //! [`GeomError::Format`] naming it; a missing or unreadable file is a [`GeomError::Io`].
 
 use crate::error::{GeomError, Result};
-use crate::store::{GlobalMap, Instance, MapConfig};
+use crate::persist_v2::cursor::Cursor;
+use crate::store::{GlobalMap, Instance};
 use crate::types::{MapClass, Point};
 use std::ffi::{OsStr, OsString};
 use std::fs::{self, File, OpenOptions};
@@ -242,53 +243,6 @@ pub fn remove_stale_temps(dir: &Path, file_name: &OsStr) -> usize {
     removed
 }
 
-/// A bounds-checked little-endian reader.
-struct Reader<'a> {
-    bytes: &'a [u8],
-    pos: usize,
-}
-
-impl<'a> Reader<'a> {
-    fn take(&mut self, n: usize, what: &str) -> std::result::Result<&'a [u8], String> {
-        if self.bytes.len() - self.pos < n {
-            return Err(format!(
-                "truncated: {what} needs {n} byte(s) at offset {} but the file ends at {}",
-                self.pos,
-                self.bytes.len()
-            ));
-        }
-        let s = &self.bytes[self.pos..self.pos + n];
-        self.pos += n;
-        Ok(s)
-    }
-    fn remaining(&self) -> usize {
-        self.bytes.len() - self.pos
-    }
-    fn u8(&mut self, what: &str) -> std::result::Result<u8, String> {
-        Ok(self.take(1, what)?[0])
-    }
-    fn u32(&mut self, what: &str) -> std::result::Result<u32, String> {
-        Ok(u32::from_le_bytes(
-            self.take(4, what)?.try_into().expect("4 bytes"),
-        ))
-    }
-    fn u64(&mut self, what: &str) -> std::result::Result<u64, String> {
-        Ok(u64::from_le_bytes(
-            self.take(8, what)?.try_into().expect("8 bytes"),
-        ))
-    }
-    fn i64(&mut self, what: &str) -> std::result::Result<i64, String> {
-        Ok(i64::from_le_bytes(
-            self.take(8, what)?.try_into().expect("8 bytes"),
-        ))
-    }
-    fn f64(&mut self, what: &str) -> std::result::Result<f64, String> {
-        Ok(f64::from_le_bytes(
-            self.take(8, what)?.try_into().expect("8 bytes"),
-        ))
-    }
-}
-
 /// An instance as read, before its values are checked.
 struct RawInstance {
     id: u64,
@@ -313,7 +267,7 @@ fn parse(bytes: &[u8], path: &str) -> Result<GlobalMap> {
     if bytes.is_empty() {
         return Err(fmt("not an icmapper map file (empty file)".into()));
     }
-    let mut r = Reader { bytes, pos: 0 };
+    let mut r = Cursor::whole_file(bytes);
     r.take(MAGIC.len(), "magic").map_err(fmt)?;
     let version = r.u32("format version").map_err(fmt)?;
     if version != FORMAT_VERSION {
@@ -322,17 +276,13 @@ fn parse(bytes: &[u8], path: &str) -> Result<GlobalMap> {
         )));
     }
     // Structure: everything up to the checksum must be present.
-    let (smoothing, spacing, next_id, raw) = (|| -> std::result::Result<_, String> {
-        let smoothing = r.f64("smoothing")?;
-        let spacing = r.f64("spacing")?;
-        let next_id = r.u64("next_id")?;
-        let count = r.u64("instance count")?;
-        if count > (r.remaining() / RECORD_FIXED) as u64 {
-            return Err(format!(
-                "truncated or corrupt: {count} instances declared but only {} bytes remain",
-                r.remaining()
-            ));
-        }
+    let (config, next_id, raw) = (|| -> std::result::Result<_, String> {
+        let (config, next_id, count) = r.map_head()?;
+        r.fits(
+            count,
+            RECORD_FIXED,
+            format_args!("{count} instances declared"),
+        )?;
         let mut raw = Vec::with_capacity(count as usize);
         for k in 0..count {
             let id = r.u64("instance id")?;
@@ -342,21 +292,26 @@ fn parse(bytes: &[u8], path: &str) -> Result<GlobalMap> {
             let last_frame = r.i64("last_frame")?;
             let observations = r.u32("observations")?;
             let n = r.u64("point count")?;
-            if n > (r.remaining() / 16) as u64 {
-                return Err(format!(
-                    "truncated or corrupt: instance #{k} (id {id}) declares {n} points but only {} bytes remain",
-                    r.remaining()
-                ));
-            }
+            r.fits(
+                n,
+                16,
+                format_args!("instance #{k} (id {id}) declares {n} points"),
+            )?;
             let mut points = Vec::with_capacity(n as usize);
             for _ in 0..n {
-                let x = r.f64("coordinate")?;
-                let y = r.f64("coordinate")?;
-                points.push(Point::new(x, y));
+                points.push(r.point()?);
             }
-            raw.push(RawInstance { id, class, closed, first_frame, last_frame, observations, points });
+            raw.push(RawInstance {
+                id,
+                class,
+                closed,
+                first_frame,
+                last_frame,
+                observations,
+                points,
+            });
         }
-        Ok((smoothing, spacing, next_id, raw))
+        Ok((config, next_id, raw))
     })()
     .map_err(fmt)?;
     let body_end = r.pos;
@@ -372,7 +327,6 @@ fn parse(bytes: &[u8], path: &str) -> Result<GlobalMap> {
         return Err(fmt(format!("checksum mismatch (stored {stored:#018x}, computed {computed:#018x}): the file is corrupt")));
     }
     // Meaning of the values.
-    let config = MapConfig { smoothing, spacing };
     config
         .validate()
         .map_err(|e| fmt(format!("bad config: {e}")))?;
@@ -413,7 +367,8 @@ fn parse(bytes: &[u8], path: &str) -> Result<GlobalMap> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::test_util::p;
+    use crate::store::MapConfig;
+    use crate::test_util::{check_flipped_bytes, check_truncations, p, reason};
     use proptest::prelude::*;
 
     /// A map built from stored parts (no dependency on resampling), with a gap in the ids.
@@ -459,13 +414,6 @@ mod tests {
         assert_eq!(a.next_id(), b.next_id());
         assert_eq!(a.instances(), b.instances());
         b.check_invariants().unwrap();
-    }
-
-    fn reason(e: GeomError) -> String {
-        match e {
-            GeomError::Format { reason, .. } => reason,
-            other => panic!("expected a Format error, got {other:?}"),
-        }
     }
 
     /// Issue 14.5: writers killed mid-save left `.NAME.tmp.<pid>.<n>` files (up to 160 MB each)
@@ -596,32 +544,12 @@ mod tests {
 
     #[test]
     fn truncation_is_detected() {
-        let bytes = to_bytes(&sample_map());
-        for cut in 0..bytes.len() {
-            let msg = reason(from_bytes(&bytes[..cut]).unwrap_err());
-            assert!(
-                msg.contains("truncated") || msg.contains("empty file"),
-                "cut {cut}: {msg}"
-            );
-        }
-        let mut longer = bytes.clone();
-        longer.push(0);
-        assert!(reason(from_bytes(&longer).unwrap_err()).contains("trailing"));
+        check_truncations(&to_bytes(&sample_map()), from_bytes);
     }
 
     #[test]
     fn every_flipped_byte_is_detected() {
-        let bytes = to_bytes(&sample_map());
-        for i in 0..bytes.len() {
-            for bit in [0u8, 3, 7] {
-                let mut b = bytes.clone();
-                b[i] ^= 1 << bit;
-                assert!(
-                    matches!(from_bytes(&b), Err(GeomError::Format { .. })),
-                    "byte {i} bit {bit}"
-                );
-            }
-        }
+        check_flipped_bytes(&to_bytes(&sample_map()), from_bytes);
     }
 
     /// Rewrites the checksum after an edit, so that the value checks are reached.

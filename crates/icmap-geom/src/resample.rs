@@ -4,7 +4,7 @@
 //! returns a [`GeomError`] or is total (never panics).
 
 use crate::error::{GeomError, Result};
-use crate::types::{validate_points, Point};
+use crate::types::{check_positive, validate_points, Point};
 
 /// Largest number of points that [`resample`] and [`resample_spacing`] produce (guards against a
 /// huge `n` or `length / spacing` overflowing memory, e.g. `n = 10**12` or a 1e7 m polyline at
@@ -184,12 +184,7 @@ fn check_length(total: f64) -> Result<()> {
 /// [`MAX_RESAMPLE_POINTS`] points would be produced.
 pub fn resample_spacing(points: &[Point], spacing: f64, closed: bool) -> Result<Vec<Point>> {
     validate_points(points, 2, "polyline")?;
-    if !(spacing.is_finite() && spacing > 0.0) {
-        return Err(GeomError::InvalidParameter {
-            name: "spacing",
-            reason: format!("must be finite and > 0, got {spacing}"),
-        });
-    }
+    check_positive("spacing", spacing)?;
     let total = polyline_length(points, closed);
     check_length(total)?;
     let segments = (total / spacing).ceil();

@@ -11,9 +11,9 @@
 //! 3. the result is the stored points before the projection of `new`'s start onto `stored`, then
 //!    `new`, then the stored points after the projection of its end (arc lengths along `stored`).
 
-use crate::error::{GeomError, Result};
+use crate::error::Result;
 use crate::resample::polyline_length;
-use crate::types::{validate_points, Point};
+use crate::types::{check_non_negative, validate_points, Point};
 
 /// The nearest point of the open polyline `poly` (at least one point) to `p`: its distance and
 /// its arc length (metres from `poly[0]`). Among segments at the same (smallest) distance the
@@ -75,12 +75,7 @@ pub fn orient_like(stored: &[Point], new: &[Point]) -> Vec<Point> {
 pub fn splice_polyline(stored: &[Point], new: &[Point], overlap: f64) -> Result<Vec<Point>> {
     validate_points(stored, 2, "stored polyline")?;
     validate_points(new, 2, "new polyline")?;
-    if !(overlap.is_finite() && overlap >= 0.0) {
-        return Err(GeomError::InvalidParameter {
-            name: "overlap",
-            reason: format!("must be finite and >= 0, got {overlap}"),
-        });
-    }
+    check_non_negative("overlap", overlap)?;
     let q = orient_like(stored, new);
     let (_, s_start) = project_onto_polyline(&q[0], stored);
     let (_, s_end) = project_onto_polyline(&q[q.len() - 1], stored);

@@ -203,15 +203,41 @@ impl Patch {
 
     /// The world-axis-aligned bounding box of the patch.
     pub fn world_aabb(&self) -> Aabb {
-        let c = self.corners();
-        let mut mins = c[0];
-        let mut maxs = c[0];
-        for p in &c[1..] {
-            mins = mins.inf(p);
-            maxs = maxs.sup(p);
-        }
-        Aabb::new(mins, maxs)
+        points_aabb(&self.corners())
     }
+}
+
+/// The axis-aligned bounding box of `points` (at least one).
+pub(crate) fn points_aabb(points: &[Point]) -> Aabb {
+    let mut mins = points[0];
+    let mut maxs = points[0];
+    for p in &points[1..] {
+        mins = mins.inf(p);
+        maxs = maxs.sup(p);
+    }
+    Aabb::new(mins, maxs)
+}
+
+/// Checks that the parameter `name` is finite and >= 0 ([`GeomError::InvalidParameter`] if not).
+pub(crate) fn check_non_negative(name: &'static str, v: f64) -> Result<()> {
+    if !(v.is_finite() && v >= 0.0) {
+        return Err(GeomError::InvalidParameter {
+            name,
+            reason: format!("must be finite and >= 0, got {v}"),
+        });
+    }
+    Ok(())
+}
+
+/// Checks that the parameter `name` is finite and > 0 ([`GeomError::InvalidParameter`] if not).
+pub(crate) fn check_positive(name: &'static str, v: f64) -> Result<()> {
+    if !(v.is_finite() && v > 0.0) {
+        return Err(GeomError::InvalidParameter {
+            name,
+            reason: format!("must be finite and > 0, got {v}"),
+        });
+    }
+    Ok(())
 }
 
 /// Checks that `points` has at least `min` points and only coordinates in the domain (finite,

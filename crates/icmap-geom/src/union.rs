@@ -645,24 +645,18 @@ mod tests {
         // Lowest-left vertex (0, 0) second: the overlay's contours start at its predecessor.
         assert_eq!(u[0][1], p(0.0, 0.0));
         assert_eq!(u[0][0], p(0.0, 1.0));
-        // Containment and disjoint rings.
-        assert!(check_fast_vs_overlay(
-            &rect(0.0, 0.0, 4.0, 4.0),
-            &rect(1.0, 1.0, 2.0, 2.0)
-        ));
-        assert!(check_fast_vs_overlay(
-            &rect(1.0, 1.0, 2.0, 2.0),
-            &rect(0.0, 0.0, 4.0, 4.0)
-        ));
-        assert!(check_fast_vs_overlay(
-            &rect(0.0, 0.0, 1.0, 1.0),
-            &rect(5.0, 0.0, 8.0, 2.0)
-        ));
-        // A cross: the union has a concave outline.
-        assert!(check_fast_vs_overlay(
-            &rect(0.0, 1.0, 3.0, 2.0),
-            &rect(1.0, 0.0, 2.0, 3.0)
-        ));
+        // Rectangles (x0, y0, x1, y1) of each pair.
+        for (a, b) in [
+            // Containment both ways, and disjoint rings.
+            ([0.0, 0.0, 4.0, 4.0], [1.0, 1.0, 2.0, 2.0]),
+            ([1.0, 1.0, 2.0, 2.0], [0.0, 0.0, 4.0, 4.0]),
+            ([0.0, 0.0, 1.0, 1.0], [5.0, 0.0, 8.0, 2.0]),
+            // A cross: the union has a concave outline.
+            ([0.0, 1.0, 3.0, 2.0], [1.0, 0.0, 2.0, 3.0]),
+        ] {
+            let r = |[x0, y0, x1, y1]: [f64; 4]| rect(x0, y0, x1, y1);
+            assert!(check_fast_vs_overlay(&r(a), &r(b)), "{a:?} {b:?}");
+        }
         // A ring around a hole: an annulus-like union whose hole is dropped.
         let (c, bar) = c_and_bar();
         assert!(check_fast_vs_overlay(&c, &bar));
@@ -820,25 +814,21 @@ mod tests {
                 assert!(e.iter().all(|q| r.iter().any(|v| (v - q).norm() < 1e-6)));
             }
         }
-        let bowtie = vec![p(0.0, 0.0), p(1.0, 1.0), p(1.0, 0.0), p(0.0, 1.0)];
-        assert!(!crate::union_fast::ring_is_simple(&bowtie));
-        let spike = vec![
-            p(0.0, 0.0),
-            p(2.0, 0.0),
-            p(2.0, 1.0),
-            p(1.0, 1.0),
-            p(1.0, 3.0),
-            p(1.0, 1.0 + 1e-3),
+        // Rings that are not simple: a bowtie, a spike, a vertex touching an edge.
+        let bowtie: &[(f64, f64)] = &[(0.0, 0.0), (1.0, 1.0), (1.0, 0.0), (0.0, 1.0)];
+        let spike = &[
+            (0.0, 0.0),
+            (2.0, 0.0),
+            (2.0, 1.0),
+            (1.0, 1.0),
+            (1.0, 3.0),
+            (1.0, 1.001),
         ];
-        assert!(!crate::union_fast::ring_is_simple(&spike));
-        let touching = vec![
-            p(0.0, 0.0),
-            p(4.0, 0.0),
-            p(4.0, 2.0),
-            p(2.0, 0.0),
-            p(0.0, 2.0),
-        ];
-        assert!(!crate::union_fast::ring_is_simple(&touching));
+        let touching = &[(0.0, 0.0), (4.0, 0.0), (4.0, 2.0), (2.0, 0.0), (0.0, 2.0)];
+        for ring in [bowtie, spike, touching] {
+            let ring: Vec<Point> = ring.iter().map(|&(x, y)| p(x, y)).collect();
+            assert!(!crate::union_fast::ring_is_simple(&ring), "{ring:?}");
+        }
         assert!(crate::union_fast::ring_is_simple(&rect(0.0, 0.0, 2.0, 1.0)));
     }
 

@@ -2,8 +2,8 @@
 
 use super::arc_length::arc_length_samples;
 use super::fit_spline::fit_spline;
-use crate::error::{GeomError, Result};
-use crate::types::Point;
+use crate::error::Result;
+use crate::types::{check_positive, Point};
 
 /// Fits a smoothing parametric cubic spline to `points` and returns it evaluated about `spacing`
 /// metres apart (ends included).
@@ -24,12 +24,7 @@ use crate::types::Point;
 /// Errors as [`fit_spline`], on a non-positive or non-finite `spacing`, and when
 /// `L / spacing` would give [`MAX_RESAMPLE_POINTS`](crate::resample::MAX_RESAMPLE_POINTS) points or more.
 pub fn fit_curve(points: &[Point], s: f64, spacing: f64) -> Result<Vec<Point>> {
-    if !(spacing.is_finite() && spacing > 0.0) {
-        return Err(GeomError::InvalidParameter {
-            name: "spacing",
-            reason: format!("must be finite and > 0, got {spacing}"),
-        });
-    }
+    check_positive("spacing", spacing)?;
     let curve = fit_spline(points, s)?;
     let (spans, samples) = arc_length_samples(&curve, spacing)?;
     let mut out: Vec<Point> = samples
@@ -47,6 +42,7 @@ pub fn fit_curve(points: &[Point], s: f64, spacing: f64) -> Result<Vec<Point>> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::error::GeomError;
     use crate::fit::test_util::{noisy_arc, p};
     use proptest::prelude::*;
 

@@ -11,7 +11,7 @@ use super::spline::{make_curve, SplineCurve};
 use super::TOL;
 use crate::error::{GeomError, Result};
 use crate::resample::{cumulative_lengths, dedup_cow};
-use crate::types::{validate_points, Point};
+use crate::types::{check_non_negative, validate_points, Point};
 
 /// A fit whose B-spline coefficients leave the data's bounding box by more than this times its
 /// diagonal is ill-posed (see [`fit_spline`]) and is redone on the interpolation knots.
@@ -33,12 +33,7 @@ const DEDUP_EPS: f64 = 1e-9;
 /// fit that stays singular.
 pub fn fit_spline(points: &[Point], s: f64) -> Result<SplineCurve> {
     validate_points(points, 2, "curve")?;
-    if !(s.is_finite() && s >= 0.0) {
-        return Err(GeomError::InvalidParameter {
-            name: "s",
-            reason: format!("must be finite and >= 0, got {s}"),
-        });
-    }
+    check_non_negative("s", s)?;
     let pts = dedup_cow(points, DEDUP_EPS, false);
     // (The last cumulative length is the polyline's length: the same sums in the same order.)
     let cum = cumulative_lengths(&pts);

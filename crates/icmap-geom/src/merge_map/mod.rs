@@ -49,6 +49,7 @@
 
 use crate::error::{GeomError, Result};
 use crate::store::{GlobalMap, Instance};
+use crate::types::{check_non_negative, check_positive};
 use rayon::prelude::*;
 
 mod graph;
@@ -97,18 +98,8 @@ impl Default for MergeMapParams {
 impl MergeMapParams {
     /// Checks `gate` finite and >= 0, `min_overlap` in (0, 1], `tolerance` finite and > 0.
     pub fn validate(&self) -> Result<()> {
-        if !(self.tolerance.is_finite() && self.tolerance > 0.0) {
-            return Err(GeomError::InvalidParameter {
-                name: "tolerance",
-                reason: format!("must be finite and > 0, got {}", self.tolerance),
-            });
-        }
-        if !(self.gate.is_finite() && self.gate >= 0.0) {
-            return Err(GeomError::InvalidParameter {
-                name: "gate",
-                reason: format!("must be finite and >= 0, got {}", self.gate),
-            });
-        }
+        check_positive("tolerance", self.tolerance)?;
+        check_non_negative("gate", self.gate)?;
         if !(self.min_overlap > 0.0 && self.min_overlap <= 1.0) {
             return Err(GeomError::InvalidParameter {
                 name: "min_overlap",
@@ -243,9 +234,15 @@ impl GlobalMap {
 mod tests {
     use super::outline::{segment_count, segment_distance2};
     use super::*;
-    use crate::test_util::{map, p, rect};
+    use crate::test_util::{add, map, p, rect};
     use crate::types::{MapClass, Point};
     use proptest::prelude::*;
+
+    /// Merges `b` into `a` with the default parameters: (merged, inserted, absorbed).
+    fn merge_counts(a: &mut GlobalMap, b: &GlobalMap) -> (usize, usize, usize) {
+        let s = a.merge_map(b, MergeMapParams::default()).unwrap();
+        (s.merged, s.inserted, s.absorbed)
+    }
 
     /// A gently curved polyline along x from `x0` to `x1` at height `y`.
     fn curve(x0: f64, x1: f64, y: f64) -> Vec<Point> {
@@ -335,10 +332,13 @@ mod tests {
     #[test]
     fn disjoint_maps_give_the_union() {
         let mut a = map();
-        a.insert(MapClass::Divider, &curve(0.0, 50.0, 0.0), 3)
-            .unwrap();
-        a.insert(MapClass::PedCrossing, &rect(10.0, 20.0, 2.0, 4.0), 4)
-            .unwrap();
+        add(&mut a, MapClass::Divider, &curve(0.0, 50.0, 0.0), 3);
+        add(
+            &mut a,
+            MapClass::PedCrossing,
+            &rect(10.0, 20.0, 2.0, 4.0),
+            4,
+        );
         a.tag_drive(1);
         let mut b = map();
         b.insert_with_id(7, MapClass::Boundary, &curve(0.0, 50.0, 30.0), 1)
@@ -348,15 +348,7 @@ mod tests {
             .unwrap();
         b.tag_drive(4);
         let before = b.clone();
-        let stats = a.merge_map(&b, MergeMapParams::default()).unwrap();
-        assert_eq!(
-            stats,
-            MergeMapStats {
-                merged: 0,
-                inserted: 2,
-                absorbed: 0
-            }
-        );
+        assert_eq!(merge_counts(&mut a, &b), (0, 2, 0));
         assert_eq!(a.ids(), vec![0, 1, 2, 3]);
         assert_eq!(a.get(2).unwrap().points, b.get(7).unwrap().points);
         assert_eq!(a.get(3).unwrap().points, b.get(9).unwrap().points);
@@ -372,24 +364,24 @@ mod tests {
     fn identical_maps_merge_one_to_one() {
         let mut a = map();
         for k in 0..4 {
-            a.insert(MapClass::Divider, &curve(0.0, 60.0, 10.0 * k as f64), k)
-                .unwrap();
+            add(
+                &mut a,
+                MapClass::Divider,
+                &curve(0.0, 60.0, 10.0 * k as f64),
+                k,
+            );
         }
-        a.insert(MapClass::PedCrossing, &rect(5.0, -20.0, 2.0, 4.0), 0)
-            .unwrap();
+        add(
+            &mut a,
+            MapClass::PedCrossing,
+            &rect(5.0, -20.0, 2.0, 4.0),
+            0,
+        );
         a.tag_drive(0);
         let mut b = a.clone();
         b.set_drives(0, &[3]).unwrap();
         let original = a.clone();
-        let stats = a.merge_map(&b, MergeMapParams::default()).unwrap();
-        assert_eq!(
-            stats,
-            MergeMapStats {
-                merged: 5,
-                inserted: 0,
-                absorbed: 0
-            }
-        );
+        assert_eq!(merge_counts(&mut a, &b), (5, 0, 0));
         assert_eq!(a.ids(), original.ids());
         for class in MapClass::ALL {
             let cd = map_chamfer(&a, &original, class);
@@ -405,37 +397,19 @@ mod tests {
     #[test]
     fn pieces_join_and_bookkeeping_adds_up() {
         let mut a = map();
-        let a1 = a
-            .insert(MapClass::Divider, &curve(0.0, 40.0, 0.0), 5)
-            .unwrap();
-        let a2 = a
-            .insert(MapClass::Divider, &curve(60.0, 100.0, 0.0), 2)
-            .unwrap();
-        let far = a
-            .insert(MapClass::Divider, &curve(0.0, 100.0, 20.0), 1)
-            .unwrap();
+        let a1 = add(&mut a, MapClass::Divider, &curve(0.0, 40.0, 0.0), 5);
+        let a2 = add(&mut a, MapClass::Divider, &curve(60.0, 100.0, 0.0), 2);
+        let far = add(&mut a, MapClass::Divider, &curve(0.0, 100.0, 20.0), 1);
         a.set_drives(a1, &[1]).unwrap();
         a.set_drives(a2, &[2]).unwrap();
         let mut b = map();
         // Spans both pieces: each lies along it entirely (share 1), so all three join.
-        b.insert(MapClass::Divider, &curve(-5.0, 105.0, 0.1), 9)
-            .unwrap();
+        add(&mut b, MapClass::Divider, &curve(-5.0, 105.0, 0.1), 9);
         // Crossings: union.
-        let c = a
-            .insert(MapClass::PedCrossing, &rect(0.0, 50.0, 2.0, 4.0), 0)
-            .unwrap();
-        b.insert(MapClass::PedCrossing, &rect(1.0, 51.0, 2.0, 4.0), 3)
-            .unwrap();
+        let c = add(&mut a, MapClass::PedCrossing, &rect(0.0, 50.0, 2.0, 4.0), 0);
+        add(&mut b, MapClass::PedCrossing, &rect(1.0, 51.0, 2.0, 4.0), 3);
         b.tag_drive(7);
-        let stats = a.merge_map(&b, MergeMapParams::default()).unwrap();
-        assert_eq!(
-            stats,
-            MergeMapStats {
-                merged: 2,
-                inserted: 0,
-                absorbed: 1
-            }
-        );
+        assert_eq!(merge_counts(&mut a, &b), (2, 0, 1));
         assert_eq!(a.ids(), vec![a1, far, c]);
         let i = a.get(a1).unwrap();
         assert_eq!((i.first_frame, i.last_frame, i.observations), (2, 9, 3));
@@ -466,11 +440,9 @@ mod tests {
     #[test]
     fn small_overlap_is_not_merged_and_threshold_decides() {
         let mut a = map();
-        a.insert(MapClass::Boundary, &curve(0.0, 40.0, 0.0), 0)
-            .unwrap();
+        add(&mut a, MapClass::Boundary, &curve(0.0, 40.0, 0.0), 0);
         let mut b = map();
-        b.insert(MapClass::Boundary, &curve(30.0, 70.0, 0.0), 0)
-            .unwrap();
+        add(&mut b, MapClass::Boundary, &curve(30.0, 70.0, 0.0), 0);
         let mut a2 = a.clone();
         let s = a.merge_map(&b, MergeMapParams::default()).unwrap();
         assert_eq!((s.merged, s.inserted), (0, 1), "an overlap of a quarter");
@@ -491,8 +463,7 @@ mod tests {
         assert!((0.2..0.4).contains(&share) && mean < 0.1, "{share} {mean}");
         // Parallel at 2 m: outside a 1.5 m gate, inside a 2.5 m one.
         let mut c = map();
-        c.insert(MapClass::Boundary, &curve(0.0, 40.0, 2.0), 0)
-            .unwrap();
+        add(&mut c, MapClass::Boundary, &curve(0.0, 40.0, 2.0), 0);
         let (share, _) = instance_overlap(a.get(0).unwrap(), c.get(0).unwrap(), 1.5);
         assert_eq!(share, 0.0);
         let (share, mean) = instance_overlap(a.get(0).unwrap(), c.get(0).unwrap(), 2.5);
@@ -545,9 +516,9 @@ mod tests {
         for (k, (pa, pb)) in cases.iter().enumerate() {
             let run = |tolerance: f64| {
                 let mut a = map();
-                a.insert(MapClass::Boundary, pa, 0).unwrap();
+                add(&mut a, MapClass::Boundary, pa, 0);
                 let mut b = map();
-                b.insert(MapClass::Boundary, pb, 1).unwrap();
+                add(&mut b, MapClass::Boundary, pb, 1);
                 let params = MergeMapParams {
                     tolerance,
                     ..MergeMapParams::default()
@@ -596,11 +567,18 @@ mod tests {
         for k in 0..30 {
             let x = 15.0 * (k % 6) as f64;
             let y = 12.0 * (k / 6) as f64;
-            base.insert(MapClass::ALL[k % 3], &curve(x, x + 30.0, y), k as i64)
-                .unwrap();
-            other
-                .insert(MapClass::ALL[k % 3], &curve(x + 10.0, x + 35.0, y + 0.3), 0)
-                .unwrap();
+            add(
+                &mut base,
+                MapClass::ALL[k % 3],
+                &curve(x, x + 30.0, y),
+                k as i64,
+            );
+            add(
+                &mut other,
+                MapClass::ALL[k % 3],
+                &curve(x + 10.0, x + 35.0, y + 0.3),
+                0,
+            );
         }
         let mut a = base.clone();
         let mut b = base.clone();

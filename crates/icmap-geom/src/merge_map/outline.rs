@@ -1,6 +1,7 @@
 //! Steps 1-2 of the module doc: each instance's geometry prepared for point-distance queries, and
 //! the overlap test of two instances (the share of one's points within the gate of the other).
 
+use crate::clip::inside_ring;
 use crate::store::Instance;
 use crate::types::Point;
 
@@ -49,7 +50,7 @@ impl<'a> Outline<'a> {
 
     /// The distance from `p` to the geometry (0 inside a ring) if it is at most `cutoff`.
     pub(super) fn distance_within(&self, p: &Point, cutoff: f64) -> Option<f64> {
-        if self.closed && inside_ring(self.pts, p) {
+        if self.closed && inside_ring(*p, self.pts) {
             return Some(0.0);
         }
         let n = self.pts.len();
@@ -92,21 +93,6 @@ pub(super) fn segment_distance2(p: &Point, a: &Point, b: &Point) -> f64 {
         0.0
     };
     (p - (a + d * t)).norm_squared()
-}
-
-/// Whether `p` lies inside the ring (even-odd rule; a ring without a repeated point).
-fn inside_ring(ring: &[Point], p: &Point) -> bool {
-    let mut inside = false;
-    let n = ring.len();
-    let mut j = n - 1;
-    for i in 0..n {
-        let (a, b) = (ring[i], ring[j]);
-        if (a.y > p.y) != (b.y > p.y) && p.x < (b.x - a.x) * (p.y - a.y) / (b.y - a.y) + a.x {
-            inside = !inside;
-        }
-        j = i;
-    }
-    inside
 }
 
 /// Points of `pts` within `gate` of `outline`: their count and the sum of their distances.

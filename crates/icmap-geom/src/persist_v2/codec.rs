@@ -70,6 +70,40 @@ pub(super) fn unzigzag(v: u64) -> i64 {
     ((v >> 1) as i64) ^ -((v & 1) as i64)
 }
 
+/// The prediction of the quantised coordinates of a point from the points before it, the same
+/// in the writer and the reader (each point is stored as its zigzag residual): the first from
+/// (0, 0), the second from the first, every later one by linear extrapolation of the two before.
+#[derive(Default)]
+pub(super) struct Predictor {
+    i: usize,
+    x1: i64,
+    y1: i64,
+    x2: i64,
+    y2: i64,
+}
+
+impl Predictor {
+    /// The prediction of the next point.
+    #[inline]
+    pub(super) fn predict(&self) -> (i64, i64) {
+        match self.i {
+            0 => (0, 0),
+            1 => (self.x1, self.y1),
+            _ => (
+                self.x1.wrapping_mul(2).wrapping_sub(self.x2),
+                self.y1.wrapping_mul(2).wrapping_sub(self.y2),
+            ),
+        }
+    }
+
+    /// Records the next point.
+    #[inline]
+    pub(super) fn push(&mut self, x: i64, y: i64) {
+        (self.x2, self.y2, self.x1, self.y1) = (self.x1, self.y1, x, y);
+        self.i += 1;
+    }
+}
+
 /// The point's Hilbert index on a 2^16 x 2^16 grid over `extent`.
 pub(super) fn hilbert_key(p: &Point, extent: &Aabb) -> u64 {
     const N: u32 = 1 << 16;

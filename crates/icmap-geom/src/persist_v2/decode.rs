@@ -1,7 +1,7 @@
 //! Decoding: instance records and blocks (checked against the index), the map assembled from
 //! them, and the dispatch between versions 1 and 2.
 
-use super::codec::{hash64, unzigzag};
+use super::codec::{hash64, unzigzag, Predictor};
 use super::cursor::{Cursor, Parse};
 use super::head::{parse_head, BlockEntry, Head};
 use super::{FORMAT_VERSION_2, PREFIX};
@@ -49,9 +49,7 @@ pub(super) fn decode_instance(c: &mut Cursor<'_>, quantum: f64) -> Parse<Decoded
     let mut points = Vec::with_capacity(n);
     if exact {
         for _ in 0..n {
-            let x = c.f64("coordinate")?;
-            let y = c.f64("coordinate")?;
-            points.push(Point::new(x, y));
+            points.push(c.point()?);
         }
     } else {
         if quantum == 0.0 {
@@ -59,21 +57,14 @@ pub(super) fn decode_instance(c: &mut Cursor<'_>, quantum: f64) -> Parse<Decoded
                 "instance {id} is quantised but the file has no quantum"
             ));
         }
-        let (mut x1, mut y1, mut x2, mut y2) = (0i64, 0i64, 0i64, 0i64);
-        for i in 0..n {
+        let mut pred = Predictor::default();
+        for _ in 0..n {
             let rx = unzigzag(c.varint("coordinate")?);
             let ry = unzigzag(c.varint("coordinate")?);
-            let (px, py) = match i {
-                0 => (0, 0),
-                1 => (x1, y1),
-                _ => (
-                    x1.wrapping_mul(2).wrapping_sub(x2),
-                    y1.wrapping_mul(2).wrapping_sub(y2),
-                ),
-            };
+            let (px, py) = pred.predict();
             let (x, y) = (px.wrapping_add(rx), py.wrapping_add(ry));
             points.push(Point::new(x as f64 * quantum, y as f64 * quantum));
-            (x2, y2, x1, y1) = (x1, y1, x, y);
+            pred.push(x, y);
         }
     }
     if points.iter().any(|p| !(p.x.is_finite() && p.y.is_finite())) {
@@ -108,7 +99,7 @@ pub(super) fn decode_block(
             e.sum
         ));
     }
-    let mut c = Cursor { bytes, pos: 0 };
+    let mut c = Cursor::new(bytes);
     let mut out = Vec::with_capacity((e.count as usize).min(bytes.len()));
     let mut drive_lists = Vec::new();
     let bbox = Aabb::new(

@@ -1,6 +1,6 @@
 //! Writing: instance records, blocks in Hilbert order, the header, index and checksums.
 
-use super::codec::{hash64, hilbert_key, put_varint, quantisable, round_i64, zigzag};
+use super::codec::{hash64, hilbert_key, put_varint, quantisable, round_i64, zigzag, Predictor};
 use super::{
     Encoding, BLOCK_INSTANCES, FORMAT_VERSION_2, HEADER, INDEX_ENTRY, INV_QUANTUM, PREFIX, QUANTUM,
 };
@@ -45,20 +45,13 @@ pub(super) fn encode_instance(
         Point::new(f64::INFINITY, f64::INFINITY),
         Point::new(-f64::INFINITY, -f64::INFINITY),
     );
-    let (mut x1, mut y1, mut x2, mut y2) = (0i64, 0i64, 0i64, 0i64);
-    for (i, p) in inst.points.iter().enumerate() {
+    let mut pred = Predictor::default();
+    for p in &inst.points {
         let (x, y) = (round_i64(p.x * INV_QUANTUM), round_i64(p.y * INV_QUANTUM));
-        let (px, py) = match i {
-            0 => (0, 0),
-            1 => (x1, y1),
-            _ => (
-                x1.wrapping_mul(2).wrapping_sub(x2),
-                y1.wrapping_mul(2).wrapping_sub(y2),
-            ),
-        };
+        let (px, py) = pred.predict();
         put_varint(out, zigzag(x.wrapping_sub(px)));
         put_varint(out, zigzag(y.wrapping_sub(py)));
-        (x2, y2, x1, y1) = (x1, y1, x, y);
+        pred.push(x, y);
         let q = Point::new(x as f64 * QUANTUM, y as f64 * QUANTUM);
         lo = lo.inf(&q);
         hi = hi.sup(&q);

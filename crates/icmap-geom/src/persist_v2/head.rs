@@ -34,14 +34,8 @@ impl Head {
 /// Reads the fixed header after magic and version (`bytes` = the first PREFIX + HEADER bytes):
 /// returns the header fields and the number of blocks, checked against `file_len`.
 pub(super) fn parse_header(bytes: &[u8], file_len: u64) -> Parse<(Head, usize)> {
-    let mut c = Cursor {
-        bytes: &bytes[PREFIX..],
-        pos: 0,
-    };
-    let smoothing = c.f64("smoothing")?;
-    let spacing = c.f64("spacing")?;
-    let next_id = c.u64("next_id")?;
-    let count = c.u64("instance count")?;
+    let mut c = Cursor::new(&bytes[PREFIX..]);
+    let (config, next_id, count) = c.map_head()?;
     let quantum = c.f64("quantum")?;
     let n_blocks = c.u64("block count")?;
     let body_len = c.u64("body length")?;
@@ -70,7 +64,7 @@ pub(super) fn parse_header(bytes: &[u8], file_len: u64) -> Parse<(Head, usize)> 
     }
     Ok((
         Head {
-            config: MapConfig { smoothing, spacing },
+            config,
             next_id,
             count,
             quantum,
@@ -91,10 +85,7 @@ pub(super) fn parse_index(head_bytes: &[u8], mut head: Head, n_blocks: usize) ->
             "header checksum mismatch (stored {stored:#018x}, computed {computed:#018x}): the file is corrupt"
         ));
     }
-    let mut c = Cursor {
-        bytes: &head_bytes[PREFIX + HEADER..body],
-        pos: 0,
-    };
+    let mut c = Cursor::new(&head_bytes[PREFIX + HEADER..body]);
     let mut blocks = Vec::with_capacity(n_blocks);
     let (mut offset, mut count) = (0u64, 0u64);
     for k in 0..n_blocks {

@@ -59,7 +59,7 @@
 //! problem is a [`GeomError::Format`] naming the file.
 
 mod codec;
-mod cursor;
+pub(crate) mod cursor;
 mod decode;
 mod encode;
 mod head;
@@ -108,7 +108,7 @@ mod tests {
     use crate::error::GeomError;
     use crate::persist::MAGIC;
     use crate::store::{GlobalMap, Instance, MapConfig};
-    use crate::test_util::p;
+    use crate::test_util::{check_flipped_bytes, check_truncations, p, reason};
     use crate::types::{MapClass, Point};
     use parry2d_f64::bounding_volume::BoundingVolume;
     use proptest::prelude::*;
@@ -181,13 +181,6 @@ mod tests {
         b.check_invariants().unwrap();
     }
 
-    fn reason(e: GeomError) -> String {
-        match e {
-            GeomError::Format { reason, .. } => reason,
-            other => panic!("expected a Format error, got {other:?}"),
-        }
-    }
-
     /// A grid of `n` dividers 10 m apart (for blocks and regions).
     fn grid_map(n: usize, encoding_noise: f64) -> GlobalMap {
         let mut m = GlobalMap::new(MapConfig::default()).unwrap();
@@ -222,22 +215,14 @@ mod tests {
             let mut out = Vec::new();
             put_varint(&mut out, v);
             assert!(out.len() <= 10);
-            let mut c = Cursor {
-                bytes: &out,
-                pos: 0,
-            };
+            let mut c = Cursor::new(&out);
             assert_eq!(c.varint("v").unwrap(), v);
         }
         for v in [0i64, -1, 1, i64::MIN, i64::MAX] {
             assert_eq!(unzigzag(zigzag(v)), v);
         }
         let bad = [0xffu8; 11];
-        assert!(Cursor {
-            bytes: &bad,
-            pos: 0
-        }
-        .varint("v")
-        .is_err());
+        assert!(Cursor::new(&bad).varint("v").is_err());
     }
 
     #[test]
@@ -421,26 +406,8 @@ mod tests {
     fn truncation_and_flipped_bytes_are_detected() {
         for encoding in [Encoding::Exact, Encoding::Compact] {
             let bytes = to_bytes(&sample_map(), encoding);
-            for cut in 0..bytes.len() {
-                let msg = reason(from_bytes(&bytes[..cut]).unwrap_err());
-                assert!(
-                    msg.contains("truncated") || msg.contains("empty file"),
-                    "cut {cut}: {msg}"
-                );
-            }
-            let mut longer = bytes.clone();
-            longer.push(0);
-            assert!(reason(from_bytes(&longer).unwrap_err()).contains("trailing"));
-            for i in 0..bytes.len() {
-                for bit in [0u8, 3, 7] {
-                    let mut b = bytes.clone();
-                    b[i] ^= 1 << bit;
-                    assert!(
-                        matches!(from_bytes(&b), Err(GeomError::Format { .. })),
-                        "byte {i} bit {bit}"
-                    );
-                }
-            }
+            check_truncations(&bytes, from_bytes);
+            check_flipped_bytes(&bytes, from_bytes);
         }
         let mut b = to_bytes(&sample_map(), Encoding::Exact);
         b[8..12].copy_from_slice(&3u32.to_le_bytes());
@@ -533,10 +500,7 @@ mod tests {
         assert!(matches!(from_bytes(&b), Err(GeomError::Format { .. })));
         // A point count of 2^63 with a valid checksum: an error, no allocation.
         let mut b = bytes.clone();
-        let mut c = Cursor {
-            bytes: &b[rec..],
-            pos: 0,
-        };
+        let mut c = Cursor::new(&b[rec..]);
         c.varint("id").unwrap();
         c.u8("flags").unwrap();
         for what in ["first", "span", "obs"] {

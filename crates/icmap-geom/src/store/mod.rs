@@ -6,7 +6,9 @@
 
 use crate::error::{GeomError, Result};
 use crate::index::SpatialIndex;
-use crate::types::{validate_points, MapClass, Point};
+use crate::types::{
+    check_non_negative, check_positive, points_aabb, validate_points, MapClass, Point,
+};
 use parry2d_f64::bounding_volume::Aabb;
 use std::collections::HashMap;
 
@@ -43,18 +45,8 @@ impl Default for MapConfig {
 impl MapConfig {
     /// Checks `smoothing >= 0` and `spacing > 0`, both finite.
     pub fn validate(&self) -> Result<()> {
-        if !(self.smoothing.is_finite() && self.smoothing >= 0.0) {
-            return Err(GeomError::InvalidParameter {
-                name: "smoothing",
-                reason: format!("must be finite and >= 0, got {}", self.smoothing),
-            });
-        }
-        if !(self.spacing.is_finite() && self.spacing > 0.0) {
-            return Err(GeomError::InvalidParameter {
-                name: "spacing",
-                reason: format!("must be finite and > 0, got {}", self.spacing),
-            });
-        }
+        check_non_negative("smoothing", self.smoothing)?;
+        check_positive("spacing", self.spacing)?;
         Ok(())
     }
 }
@@ -153,16 +145,6 @@ pub struct GlobalMap {
     /// Provenance: the sorted, distinct drives that observed each instance (absent: none); see
     /// `provenance.rs`.
     pub(crate) drives: HashMap<u64, Box<[u32]>>,
-}
-
-fn points_aabb(points: &[Point]) -> Aabb {
-    let mut mins = points[0];
-    let mut maxs = points[0];
-    for p in &points[1..] {
-        mins = mins.inf(p);
-        maxs = maxs.sup(p);
-    }
-    Aabb::new(mins, maxs)
 }
 
 impl GlobalMap {
@@ -465,7 +447,7 @@ impl GlobalMap {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::test_util::p;
+    use crate::test_util::{add, p, query_boxes};
     use crate::types::{Patch, Pose2};
     use proptest::prelude::*;
 
@@ -495,10 +477,7 @@ mod tests {
         for k in 0..12 {
             let y = 10.0 * k as f64;
             if k % 3 == 0 {
-                ids.push(
-                    a.insert(MapClass::PedCrossing, &square(0.0, y, 2.0), 0)
-                        .unwrap(),
-                );
+                ids.push(add(&mut a, MapClass::PedCrossing, &square(0.0, y, 2.0), 0));
             } else {
                 let pts: Vec<Point> = (0..30)
                     .map(|i| p(i as f64, y + 0.1 * (i as f64).sin()))
@@ -590,12 +569,8 @@ mod tests {
     #[test]
     fn insert_assigns_increasing_ids_and_resamples() {
         let mut m = map();
-        let a = m
-            .insert(MapClass::Divider, &line(0.0, 0.0, 10.0, 0.0), 3)
-            .unwrap();
-        let b = m
-            .insert(MapClass::PedCrossing, &square(50.0, 0.0, 2.0), 4)
-            .unwrap();
+        let a = add(&mut m, MapClass::Divider, &line(0.0, 0.0, 10.0, 0.0), 3);
+        let b = add(&mut m, MapClass::PedCrossing, &square(50.0, 0.0, 2.0), 4);
         assert_eq!((a, b), (0, 1));
         let ia = m.get(a).unwrap();
         assert_eq!(ia.points.len(), 11);
@@ -613,7 +588,7 @@ mod tests {
         let mut m = map();
         let mut ring = square(0.0, 0.0, 1.0);
         ring.push(ring[0]);
-        let id = m.insert(MapClass::PedCrossing, &ring, 0).unwrap();
+        let id = add(&mut m, MapClass::PedCrossing, &ring, 0);
         assert_eq!(m.get(id).unwrap().points.len(), 8);
         // Three points of which one repeats: not a ring.
         assert!(matches!(
@@ -639,8 +614,7 @@ mod tests {
             .insert_with_id(u64::MAX, MapClass::Boundary, &line(0.0, 0.0, 1.0, 1.0), 0)
             .is_err());
         assert_eq!(
-            m.insert(MapClass::Divider, &line(0.0, 0.0, 2.0, 0.0), 1)
-                .unwrap(),
+            add(&mut m, MapClass::Divider, &line(0.0, 0.0, 2.0, 0.0), 1),
             11
         );
         m.insert_with_id(3, MapClass::Divider, &line(0.0, 5.0, 2.0, 5.0), 1)
@@ -658,16 +632,14 @@ mod tests {
         assert!(!m.contains(10));
         // Ids are never reused.
         assert_eq!(
-            m.insert(MapClass::Divider, &line(0.0, 0.0, 2.0, 0.0), 1)
-                .unwrap(),
+            add(&mut m, MapClass::Divider, &line(0.0, 0.0, 2.0, 0.0), 1),
             12
         );
         m.check_invariants().unwrap();
         m.clear();
         assert!(m.is_empty());
         assert_eq!(
-            m.insert(MapClass::Divider, &line(0.0, 0.0, 2.0, 0.0), 1)
-                .unwrap(),
+            add(&mut m, MapClass::Divider, &line(0.0, 0.0, 2.0, 0.0), 1),
             13
         );
         m.check_invariants().unwrap();
@@ -701,9 +673,7 @@ mod tests {
             m.merge(5, &line(0.0, 0.0, 1.0, 0.0), 0),
             Err(GeomError::UnknownId(5))
         ));
-        let id = m
-            .insert(MapClass::Divider, &line(0.0, 0.0, 4.0, 0.0), 0)
-            .unwrap();
+        let id = add(&mut m, MapClass::Divider, &line(0.0, 0.0, 4.0, 0.0), 0);
         let before = m.get(id).unwrap().clone();
         assert!(m.merge(id, &[p(0.0, 0.0)], 1).is_err());
         assert!(m
@@ -771,19 +741,16 @@ mod tests {
     #[test]
     fn query_and_sample_patch() {
         let mut m = map();
-        let a = m
-            .insert(MapClass::Divider, &line(-20.0, 1.0, 20.0, 1.0), 0)
-            .unwrap();
-        let b = m
-            .insert(MapClass::PedCrossing, &square(3.0, -3.0, 1.0), 0)
-            .unwrap();
-        let _far = m
-            .insert(MapClass::Boundary, &line(100.0, 100.0, 120.0, 100.0), 0)
-            .unwrap();
+        let a = add(&mut m, MapClass::Divider, &line(-20.0, 1.0, 20.0, 1.0), 0);
+        let b = add(&mut m, MapClass::PedCrossing, &square(3.0, -3.0, 1.0), 0);
+        let _far = add(
+            &mut m,
+            MapClass::Boundary,
+            &line(100.0, 100.0, 120.0, 100.0),
+            0,
+        );
         // Bounding box overlaps the patch but the geometry does not (diagonal away from it).
-        let _diag = m
-            .insert(MapClass::Boundary, &line(6.0, 30.0, 30.0, 6.0), 0)
-            .unwrap();
+        let _diag = add(&mut m, MapClass::Boundary, &line(6.0, 30.0, 30.0, 6.0), 0);
         let pose = Pose2::new(0.0, 0.0, std::f64::consts::FRAC_PI_2).unwrap();
         let patch = Patch::new(pose, 10.0, 10.0, 0.0).unwrap();
         assert_eq!(m.query(&patch), vec![a, b]);
@@ -816,18 +783,14 @@ mod tests {
     #[test]
     fn merge_updates_bookkeeping_and_index() {
         let mut m = map();
-        let a = m
-            .insert(MapClass::Divider, &line(0.0, 0.0, 10.0, 0.0), 2)
-            .unwrap();
+        let a = add(&mut m, MapClass::Divider, &line(0.0, 0.0, 10.0, 0.0), 2);
         m.merge(a, &line(5.0, 0.0, 30.0, 0.0), 5).unwrap();
         let i = m.get(a).unwrap();
         assert_eq!((i.first_frame, i.last_frame, i.observations), (2, 5, 2));
         assert!(m.bbox(a).unwrap().maxs.x > 25.0);
         let pose = Pose2::new(27.0, 0.0, 0.0).unwrap();
         assert_eq!(m.query(&Patch::new(pose, 1.0, 1.0, 0.0).unwrap()), vec![a]);
-        let c = m
-            .insert(MapClass::PedCrossing, &square(50.0, 0.0, 1.0), 1)
-            .unwrap();
+        let c = add(&mut m, MapClass::PedCrossing, &square(50.0, 0.0, 1.0), 1);
         m.merge(c, &square(51.0, 0.0, 1.0), 0).unwrap();
         let i = m.get(c).unwrap();
         assert_eq!((i.first_frame, i.last_frame, i.observations), (0, 1, 2));
@@ -927,8 +890,7 @@ mod tests {
         /// The spatial index answers like brute force after random insert / remove.
         #[test]
         fn index_matches_brute_force_insert_remove(ops in prop::collection::vec(op(), 1..150),
-                                                   queries in prop::collection::vec(
-                                                       (-220.0..220.0f64, -220.0..220.0f64, 0.0..120.0f64, 0.0..120.0f64), 6)) {
+                                                   queries in query_boxes(220.0, 120.0, 6)) {
             run_ops(&ops, &queries, false)?;
         }
 
@@ -936,8 +898,7 @@ mod tests {
         /// (needs merge.rs).
         #[test]
         fn index_matches_brute_force_with_merge(ops in prop::collection::vec(op(), 1..150),
-                                                queries in prop::collection::vec(
-                                                    (-220.0..220.0f64, -220.0..220.0f64, 0.0..120.0f64, 0.0..120.0f64), 6)) {
+                                                queries in query_boxes(220.0, 120.0, 6)) {
             run_ops(&ops, &queries, true)?;
         }
 

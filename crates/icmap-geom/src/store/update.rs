@@ -1,10 +1,11 @@
 //! Changing the map one instance at a time: inserts, merges by the class rules (also many at
 //! once, in parallel), replaces and splices, with the bookkeeping they update.
 
-use super::{points_aabb, GlobalMap, Instance, MapConfig, DEDUP_EPS};
+use super::{GlobalMap, Instance, MapConfig, DEDUP_EPS};
 use crate::error::{GeomError, Result};
 use crate::merge::{merge_polygon, merge_polyline};
 use crate::resample::{dedup_cow, resample_spacing};
+use crate::types::points_aabb;
 use crate::types::{validate_points, MapClass, Point};
 use std::collections::HashMap;
 

@@ -76,7 +76,7 @@ impl SweepBuffers {
         start.resize(nb + 1, 0);
         bucket_of.clear();
         for bx in boxes.iter() {
-            let b = buckets.of(bx.x0);
+            let b = buckets.of(bx.bb.x0);
             bucket_of.push(b as u32);
             start[b + 1] += 1;
         }
@@ -130,14 +130,14 @@ pub(super) fn find_crossings(
     cand.clear();
     cand.resize(ne, 0);
     for (k, be) in sorted.iter().enumerate() {
-        let end = start[buckets.of(be.x1) + 1] as usize;
+        let end = start[buckets.of(be.bb.x1) + 1] as usize;
         let mut nc = 0usize;
         // `end > k`: a box's own bucket is at most its end's bucket.
         for (bf, j) in sorted.get(k + 1..end).unwrap_or(&[]).iter().zip(k + 1..) {
-            let keep = (bf.y0 <= be.y1)
-                & (be.y0 <= bf.y1)
-                & (bf.x0 <= be.x1)
-                & (be.x0 <= bf.x1)
+            let keep = (bf.bb.y0 <= be.bb.y1)
+                & (be.bb.y0 <= bf.bb.y1)
+                & (bf.bb.x0 <= be.bb.x1)
+                & (be.bb.x0 <= bf.bb.x1)
                 & (bf.edge != be.next)
                 & (be.edge != bf.next);
             cand[nc] = j as u32;
@@ -184,26 +184,13 @@ fn test_pair(e: &Edge, f: &Edge, tol: f64, tol2: f64, src: &Source<'_>) -> Optio
     }
     // All four are well away from zero here (each endpoint is >= tol from the other
     // segment and the crossing is proper), so both denominators are non-zero.
-    let (ea, ta, eb, tb, da, db, pa) = if e.ring == 0 {
-        (
-            e.i,
-            d1 / (d1 - d2),
-            f.i,
-            d3 / (d3 - d4),
-            p2.sub(p1),
-            q2.sub(q1),
-            p1,
-        )
+    // Each edge's index, crossing parameter, direction and start; ring 0's edge first.
+    let at_e = (e.i, d1 / (d1 - d2), p2.sub(p1), p1);
+    let at_f = (f.i, d3 / (d3 - d4), q2.sub(q1), q1);
+    let ((ea, ta, da, pa), (eb, tb, db, _)) = if e.ring == 0 {
+        (at_e, at_f)
     } else {
-        (
-            f.i,
-            d3 / (d3 - d4),
-            e.i,
-            d1 / (d1 - d2),
-            q2.sub(q1),
-            p2.sub(p1),
-            q1,
-        )
+        (at_f, at_e)
     };
     if !(ta > 0.0 && ta < 1.0 && tb > 0.0 && tb < 1.0) {
         return None;
@@ -230,21 +217,19 @@ fn test_pair(e: &Edge, f: &Edge, tol: f64, tol2: f64, src: &Source<'_>) -> Optio
 #[inline(always)]
 fn caller_point(p: V, (ea, da): (u32, V), (eb, db): (u32, V), src: &Source<'_>) -> Point {
     let (wa, wb) = (src.orig(0, ea as usize), src.orig(1, eb as usize));
+    // One coordinate: edge a's if a is parallel to the other axis, else edge b's, else p's.
+    let pick = |da: f64, db: f64, wa: f64, wb: f64, p: f64| {
+        if da == 0.0 {
+            wa
+        } else if db == 0.0 {
+            wb
+        } else {
+            p
+        }
+    };
     Point::new(
-        if da.x == 0.0 {
-            wa.x
-        } else if db.x == 0.0 {
-            wb.x
-        } else {
-            p.x + src.origin.x
-        },
-        if da.y == 0.0 {
-            wa.y
-        } else if db.y == 0.0 {
-            wb.y
-        } else {
-            p.y + src.origin.y
-        },
+        pick(da.x, db.x, wa.x, wb.x, p.x + src.origin.x),
+        pick(da.y, db.y, wa.y, wb.y, p.y + src.origin.y),
     )
 }
 

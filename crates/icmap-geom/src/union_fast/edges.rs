@@ -1,7 +1,7 @@
 //! The rings' edges and their sweep boxes, with the edge-length and spike tests (step 2 of the
 //! module doc, first half).
 
-use super::primitives::{near, V};
+use super::primitives::{near, BBox, V};
 use super::NEAR_MARGIN;
 
 /// One edge of a ring: ring (0 or 1), index of its first vertex.
@@ -18,10 +18,7 @@ pub(super) struct Edge {
 /// The bounding box of an edge grown by tol (`x` along the sweep axis, `y` across it).
 #[derive(Clone, Copy)]
 pub(super) struct SweepBox {
-    pub(super) x0: f64,
-    pub(super) x1: f64,
-    pub(super) y0: f64,
-    pub(super) y1: f64,
+    pub(super) bb: BBox,
     /// Index into the edge list.
     pub(super) edge: u32,
     /// Index of the next edge of the same ring in the edge list.
@@ -88,10 +85,12 @@ pub(super) fn build_edges(
             lo = if x0 < lo { x0 } else { lo };
             hi = if x0 > hi { x0 } else { hi };
             boxes.push(SweepBox {
-                x0,
-                x1: x1 + tol,
-                y0: y0 - tol,
-                y1: y1 + tol,
+                bb: BBox {
+                    x0,
+                    x1: x1 + tol,
+                    y0: y0 - tol,
+                    y1: y1 + tol,
+                },
                 edge: (base + i) as u32,
                 next: (base + next) as u32,
             });
@@ -125,16 +124,16 @@ mod tests {
         );
         // Each box is its edge's box grown by tol; `next` is the ring's next edge.
         for (e, bx) in edges.iter().zip(&boxes) {
-            assert_eq!(bx.x0, e.p.x.min(e.q.x) - tol);
-            assert_eq!(bx.y1, e.p.y.max(e.q.y) + tol);
+            assert_eq!(bx.bb.x0, e.p.x.min(e.q.x) - tol);
+            assert_eq!(bx.bb.y1, e.p.y.max(e.q.y) + tol);
             assert!((e.len - e.q.sub(e.p).dot(e.q.sub(e.p)).sqrt()).abs() < 1e-15);
         }
         assert_eq!((boxes[3].next, boxes[6].next), (0, 4));
         assert_eq!((lo, hi), (-tol, 4.0 - tol));
         // Along y, the box's `x` is world y.
         build_edges(&[&a, &b], tol, false, &mut edges, &mut boxes).unwrap();
-        assert_eq!(boxes[0].x0, -tol);
-        assert_eq!(boxes[0].y1, 4.0 + tol);
+        assert_eq!(boxes[0].bb.x0, -tol);
+        assert_eq!(boxes[0].bb.y1, 4.0 + tol);
     }
 
     #[test]

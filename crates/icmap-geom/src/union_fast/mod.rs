@@ -66,12 +66,13 @@ mod trace;
 
 pub(crate) use simple::ring_is_simple;
 
+use crate::clip::inside_ring;
 use crate::types::Point;
 use crossings::{find_crossings, Cross, SweepBuffers};
 use edges::{build_edges, Edge, SweepBox};
 use finish::finish_ring;
 use order::order_along_rings;
-use primitives::{inside, load_ring, V};
+use primitives::{load_ring, V};
 use trace::trace_loops;
 
 /// Above this many vertices in all the general overlay is used (the sweep is quadratic in the
@@ -249,9 +250,9 @@ fn disjoint_or_nested(
     kept: &mut Vec<Point>,
 ) -> Option<Vec<Vec<Point>>> {
     let [ra, rb] = *rings;
-    let rings_out: &[u8] = if inside(ra[0], rb) {
+    let rings_out: &[u8] = if inside_ring(ra[0], rb) {
         &[1]
-    } else if inside(rb[0], ra) {
+    } else if inside_ring(rb[0], ra) {
         &[0]
     } else if area_a >= area_b {
         &[0, 1]
@@ -269,8 +270,9 @@ fn disjoint_or_nested(
 
 #[cfg(test)]
 mod tests {
-    use super::test_util::{area2, seg_dist, star, Rng};
+    use super::test_util::{seg_dist, star, Rng};
     use super::*;
+    use crate::clip::signed_area2;
     use geo::{Area, BooleanOps, Coord, LineString, Polygon};
 
     fn to_geo(r: &[Point]) -> Polygon<f64> {
@@ -321,7 +323,7 @@ mod tests {
                 .fold(0.0f64, |e, p| e.max((p.x - ox).abs()).max((p.y - oy).abs()))
                 * 2.0;
             for (r, &w) in fast.iter().zip(&want) {
-                let got = 0.5 * area2(r);
+                let got = 0.5 * signed_area2(r);
                 assert!(got > 0.0, "seed {seed}: clockwise");
                 let perim: f64 = (0..r.len())
                     .map(|i| (r[(i + 1) % r.len()] - r[i]).norm())
@@ -368,7 +370,7 @@ mod tests {
         let (a, b) = (sq(0.0, 0.0, 1.0), sq(5.0, 0.5, 2.0));
         let two = union_two_simple(&a, &b).unwrap();
         assert_eq!(two.len(), 2);
-        assert!(area2(&two[0]) > area2(&two[1]));
+        assert!(signed_area2(&two[0]) > signed_area2(&two[1]));
         assert!(union_two_simple_solid(&a, &b).is_none());
         // Overlapping: one ring from both.
         let c = sq(0.5, 0.25, 1.0);

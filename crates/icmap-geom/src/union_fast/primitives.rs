@@ -1,6 +1,8 @@
 //! Geometry primitives of the fast union: a plain 2-D vector in the local frame, bounding boxes,
-//! signed area, the exact "closer than tol" test of a point and a segment, and ray casting.
+//! signed area and the exact "closer than tol" test of a point and a segment (ray casting:
+//! `crate::clip::inside_ring`).
 
+use crate::clip::Xy;
 use crate::types::Point;
 
 #[derive(Clone, Copy, Debug)]
@@ -133,25 +135,18 @@ pub(super) fn near(p: V, a: V, b: V, tol2: f64) -> bool {
     d.dot(d) < tol2
 }
 
-/// Ray casting (half-open rule); `p` must be well away from the ring's boundary.
-pub(super) fn inside(p: V, r: &[V]) -> bool {
-    let n = r.len();
-    let mut c = false;
-    let mut j = n - 1;
-    for i in 0..n {
-        let (a, b) = (r[i], r[j]);
-        if (a.y > p.y) != (b.y > p.y) && p.x < (b.x - a.x) * (p.y - a.y) / (b.y - a.y) + a.x {
-            c = !c;
-        }
-        j = i;
+impl Xy for V {
+    #[inline]
+    fn xy(self) -> (f64, f64) {
+        (self.x, self.y)
     }
-    c
 }
 
 #[cfg(test)]
 mod tests {
     use super::super::test_util::{seg_dist, star, Rng};
     use super::*;
+    use crate::clip::inside_ring;
 
     fn v(x: f64, y: f64) -> V {
         V { x, y }
@@ -189,8 +184,8 @@ mod tests {
             assert_eq!(bb.x0, xs.clone().fold(f64::INFINITY, f64::min));
             assert_eq!(bb.x1, xs.fold(f64::NEG_INFINITY, f64::max));
             // The star's centre is inside, a point beyond its outer radius is not.
-            assert!(inside(v(2.0, -3.0), &local));
-            assert!(!inside(v(2.0 + 4.5, -3.0), &local));
+            assert!(inside_ring(v(2.0, -3.0), &local));
+            assert!(!inside_ring(v(2.0 + 4.5, -3.0), &local));
         }
         let (_, a2) = load_ring(&[], Point::new(0.0, 0.0), &mut Vec::new());
         assert_eq!(a2, 0.0);

@@ -17,17 +17,6 @@ pub(super) fn star(rng: &mut Rng, cx: f64, cy: f64, k: usize, r: f64) -> Vec<Poi
         .collect()
 }
 
-/// Twice the signed area of a ring.
-pub(super) fn area2(r: &[Point]) -> f64 {
-    let n = r.len();
-    (0..n)
-        .map(|i| {
-            let (p, q) = (r[i], r[(i + 1) % n]);
-            p.x * q.y - p.y * q.x
-        })
-        .sum()
-}
-
 /// Whether segments `p1-p2` and `q1-q2` cross properly (each one's ends strictly on both sides of
 /// the other's line).
 pub(super) fn cross_properly(p1: Point, p2: Point, q1: Point, q2: Point) -> bool {

@@ -289,8 +289,11 @@ mod tests {
         Frame::new(m.nx, m.ny, m.nx as f64 / 2.0, m.ny as f64 / 2.0)
     }
 
-    fn summary(got: &[(Vec<Cell>, Vec<Point>)]) -> Vec<(usize, Cell, Cell)> {
-        got.iter()
+    /// The branches of `m` (no minimum length) at `through` and `spur`, each as (cells, first
+    /// cell, last cell).
+    fn summary(m: &Grid<bool>, through: f64, spur: f64) -> Vec<(usize, Cell, Cell)> {
+        skeleton_branches(m, &frame_of(m), 0.0, through, spur)
+            .iter()
             .map(|(p, _)| (p.len(), p[0], p[p.len() - 1]))
             .collect()
     }
@@ -305,15 +308,12 @@ mod tests {
         for i in 5..12 {
             m.set(i, 20, true);
         }
-        let f = frame_of(&m);
-        let joined = skeleton_branches(&m, &f, 0.0, 45.0, 4.0);
         assert_eq!(
-            summary(&joined),
+            summary(&m, 45.0, 4.0),
             vec![(31, (4, 2), (4, 37)), (5, (7, 20), (11, 20))]
         );
-        let cut = skeleton_branches(&m, &f, 0.0, 0.0, 0.0);
         assert_eq!(
-            summary(&cut),
+            summary(&m, 0.0, 0.0),
             vec![
                 (16, (4, 2), (4, 17)),
                 (15, (4, 23), (4, 37)),
@@ -321,8 +321,7 @@ mod tests {
             ]
         );
         // a stem shorter than `spur` is dropped
-        let short = skeleton_branches(&m, &f, 0.0, 45.0, 6.0);
-        assert_eq!(summary(&short), vec![(31, (4, 2), (4, 37))]);
+        assert_eq!(summary(&m, 45.0, 6.0), vec![(31, (4, 2), (4, 37))]);
     }
 
     #[test]
@@ -332,10 +331,8 @@ mod tests {
             m.set(10, k, true);
             m.set(k, 10, true);
         }
-        let f = frame_of(&m);
-        let got = skeleton_branches(&m, &f, 0.0, 45.0, 4.0);
         assert_eq!(
-            summary(&got),
+            summary(&m, 45.0, 4.0),
             vec![(16, (0, 10), (20, 10)), (16, (10, 0), (10, 20))]
         );
         let ring = grid_from(&[

@@ -25,20 +25,12 @@ use crate::types::Point;
 /// A component's cells copied into a grid around them (one unset cell of margin): the grid and
 /// the global cell of its `(0, 0)`.
 fn crop(cells: &[Cell]) -> (Grid<bool>, Cell) {
-    let i0 = cells
-        .iter()
-        .map(|c| c.0)
-        .min()
-        .unwrap_or(0)
-        .saturating_sub(1);
-    let j0 = cells
-        .iter()
-        .map(|c| c.1)
-        .min()
-        .unwrap_or(0)
-        .saturating_sub(1);
-    let i1 = cells.iter().map(|c| c.0).max().unwrap_or(0) + 2;
-    let j1 = cells.iter().map(|c| c.1).max().unwrap_or(0) + 2;
+    // The cells' range along one axis with the margin: (first, one past the last).
+    let range = |axis: fn(&Cell) -> usize| {
+        let lo = cells.iter().map(axis).min().unwrap_or(0).saturating_sub(1);
+        (lo, cells.iter().map(axis).max().unwrap_or(0) + 2)
+    };
+    let ((i0, i1), (j0, j1)) = (range(|c| c.0), range(|c| c.1));
     let mut g = Grid::filled(i1 - i0, j1 - j0, false);
     for &(i, j) in cells {
         g.set(i - i0, j - j0, true);

@@ -6,6 +6,8 @@
 //! `ConvexHull` returns it. Fewer than three non-collinear points give a point or a segment.
 
 use super::segments::orientation;
+/// Twice the signed area of a ring (positive counter-clockwise); owned by [`crate::clip`].
+pub use crate::clip::signed_area2;
 use crate::types::Point;
 
 /// The convex hull of a point set.
@@ -69,17 +71,6 @@ pub fn convex_hull(pts: &[Point]) -> Hull {
         .unwrap_or(0);
     cw.rotate_left(start);
     Hull::Polygon(cw)
-}
-
-/// Twice the signed area of a ring (positive counter-clockwise).
-pub fn signed_area2(ring: &[Point]) -> f64 {
-    let n = ring.len();
-    (0..n)
-        .map(|k| {
-            let (a, b) = (ring[k], ring[(k + 1) % n]);
-            a.x * b.y - b.x * a.y
-        })
-        .sum()
 }
 
 /// GEOS `LineSegment::distancePerpendicularOriented`: signed distance of `p` from the line
