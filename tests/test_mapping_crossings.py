@@ -201,3 +201,18 @@ def test_mapper_config_names_the_crossing_rule() -> None:
     assert MapperConfig.from_dict({"crossing_merge": "union"}).crossing_merge == "union"
     with pytest.raises(ValueError, match="crossing_merge"):
         MapperConfig(crossing_merge="mean")
+
+
+def test_a_new_crossing_confirms_at_once_unless_a_sliver_at_the_range_edge() -> None:
+    """``CrossingMerger.confirmable``: a whole view, or a cut view enclosing ``CONFIRM_AREA``, may
+    enter the map at its first sighting; a sliver cut by the range edge may not."""
+    from icmapper.mapping.crossings import CONFIRM_AREA
+
+    cm = CrossingMerger("average", RANGE_60x30)
+    assert cm.confirmable(_rect(0, 0, 3, 8))  # whole, 24 m^2
+    assert cm.confirmable(_rect(0, 0, 1, 1))  # whole however small
+    cut = _rect(28.5, 0, 3, 8)  # 27-30 m: cut by the front edge, 24 m^2
+    assert not is_complete(cut, RANGE_60x30) and _area(cut) >= CONFIRM_AREA
+    assert cm.confirmable(cut)
+    sliver = _rect(29.0, 14.0, 2.6, 1.2)  # the corner of the range
+    assert not cm.confirmable(sliver)

@@ -243,18 +243,22 @@ def test_global_id_survives_long_occlusion_by_reidentification(
     m = src.mapper  # type: ignore[attr-defined]
     assert len(ids) == 2 and ids[GAP_START - 1] == ids[GAP_START + 5], ids
     assert m.stats.reidentified >= 1
-    # Without re-identification the same gap splits the instance: the check above can fail.
-    src2 = DropSource(OracleDetector(seq, RNG, noise="none", gt=gts), GAP_ID, gap)
-    src2_m = Mapper(src2, config=MapperConfig(reid_distance=0.0))
-    before = after = None
-    for i in range(len(seq)):
-        f = seq.frame(i, with_images=False)
-        d = src2.detect(f)
-        r = src2_m.step(f)
-        if i in (GAP_START - 1, GAP_START + 5):
-            tid = int(r.track_ids[d.gt_ids.tolist().index(GAP_ID)])  # type: ignore[union-attr]
-            before, after = (tid, after) if i == GAP_START - 1 else (before, tid)
-    assert before != after
+    # Without re-identification and absorption the same gap splits the instance: the check above
+    # can fail. Absorption alone also restores the identity: the returning piece is absorbed into
+    # the instance, and its track reports the instance it maps into (reid.instance_ids).
+    for cfg, same in ((MapperConfig(reid_distance=0.0, absorb=False), False),
+                      (MapperConfig(reid_distance=0.0), True)):  # fmt: skip
+        src2 = DropSource(OracleDetector(seq, RNG, noise="none", gt=gts), GAP_ID, gap)
+        src2_m = Mapper(src2, config=cfg)
+        before = after = None
+        for i in range(len(seq)):
+            f = seq.frame(i, with_images=False)
+            d = src2.detect(f)
+            r = src2_m.step(f)
+            if i in (GAP_START - 1, GAP_START + 5):
+                tid = int(r.track_ids[d.gt_ids.tolist().index(GAP_ID)])  # type: ignore[union-attr]
+                before, after = (tid, after) if i == GAP_START - 1 else (before, tid)
+        assert (before == after) is same, (cfg, before, after)
 
 
 def test_track_id_survives_short_occlusion_sliding_curb(
@@ -576,3 +580,16 @@ def test_reidentify_needs_the_overlap_share(min_overlap: float, renamed: bool) -
     )  # fmt: skip
     assert decision.renamed == ({7: 3} if renamed else {})
     assert decision.aliased == {}
+
+
+def test_tracks_report_the_instance_they_map_into() -> None:
+    """``reid.instance_ids``: an aliased track reports its instance's id, unless the instance's
+    own track or another piece already reports it in the frame (ids stay unique)."""
+    from icmapper.mapping.reid import instance_ids
+
+    alias = {12: 5, 13: 5, 14: 7}
+    # 12 -> 5 (5 is not in the frame); 13 also maps into 5: already reported, keeps 13
+    assert instance_ids(np.array([12, 13, 3]), alias).tolist() == [5, 13, 3]
+    # the instance's own track 7 is in the frame: the piece 14 keeps its id, wherever it stands
+    assert instance_ids(np.array([14, 7]), alias).tolist() == [14, 7]
+    assert instance_ids(np.array([], np.int64), alias).tolist() == []

@@ -54,6 +54,11 @@ RING_POINTS = 160
 REVEAL_FRACTION = 0.5
 #: Square metres: a view enclosing less is degenerate (a collapsed ring) and is left out.
 MIN_VIEW_AREA = 1.0
+#: Square metres a view cut by the range edge must enclose for a new crossing to enter the map
+#: on its first sighting (``MapperConfig.confirm_score``): a crosswalk is about 3 x 8 m; a
+#: smaller cut view may be the corner of a neighbouring one (real intersections: a sliver taken
+#: in at once was absorbed into the crosswalk beside it, which then grew over both).
+CONFIRM_AREA = 10.0
 
 
 def is_complete(
@@ -139,6 +144,11 @@ class CrossingMerger:
         it)."""
         whole = is_complete(ego, self.rng) and abs(signed_ring_area(ego)) >= MIN_VIEW_AREA
         self._counts[int(target)] = int(whole)
+
+    def confirmable(self, ego: NDArray[np.floating]) -> bool:
+        """Whether a view (n, 2) ego metres of a new crossing may enter the map at its first
+        sighting: seen whole, or cut by the range edge but enclosing ``CONFIRM_AREA``."""
+        return is_complete(ego, self.rng) or abs(signed_ring_area(ego)) >= CONFIRM_AREA
 
     def absorbed(self, gone: int, into: int) -> None:
         """Instance ``gone`` became part of ``into`` (``GlobalMap.absorb``): their complete views

@@ -59,7 +59,7 @@ from icmapper.mapping.crossings import CrossingMerger
 from icmapper.mapping.fuse import fuse_with_history
 from icmapper.mapping.merge import merge_frame
 from icmapper.mapping.network_source import NetworkDetector
-from icmapper.mapping.reid import reidentify
+from icmapper.mapping.reid import instance_ids, reidentify
 from icmapper.mapping.stats import NETWORK_STAGES, STAGES, UNTRACKED_ID_BASE, MapperStats
 from icmapper.mapping.tracker import Tracker
 from icmapper.mapping.types import Detections, DetectionSource, StepResult
@@ -272,7 +272,7 @@ class Mapper:
         sec["merge"] += time.perf_counter() - t4
 
         all_ids = np.empty(len(dets), np.int64)
-        all_ids[tracked] = track_ids
+        all_ids[tracked] = instance_ids(track_ids, self._alias)  # what each track maps into
         n_untracked = int((~tracked).sum())
         all_ids[~tracked] = np.arange(self._untracked, self._untracked + n_untracked)
         self._untracked += n_untracked

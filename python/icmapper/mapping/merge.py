@@ -8,7 +8,8 @@ into the global map by the rule for what it is.
   run in one parallel ``merge_many`` call: the same map as merging in order);
 - a new instance: inserted once its track has been seen in ``min_hits`` frames, or at once when
   its detection scores at least ``confirm_score`` (a confident first sighting is not held back:
-  an instance in range in a single keyframe would never enter the map).
+  an instance in range in a single keyframe would never enter the map) and, for a crossing, the
+  view is more than a sliver at the range edge (``CrossingMerger.confirmable``).
 
 Rejected geometry is reported to ``on_failure`` and skipped. The map, the crossing rule and the
 tracker's points change in place; the caller owns them. No I/O.
@@ -100,7 +101,12 @@ def merge_frame(
             )
             commit(tid, target, world, change)
             continue
-        if tracker.track(tid).hits < config.min_hits and scores[j] < config.confirm_score:
+        # a confident first sighting goes in at once; a crossing only when it is more than a
+        # sliver at the range edge (mapping.crossings.confirmable)
+        confident = scores[j] >= config.confirm_score and (
+            not crossing or crossings.confirmable(fused[j])
+        )
+        if tracker.track(tid).hits < config.min_hits and not confident:
             continue  # tentative track: not in the map until confirmed
         try:
             global_map.insert_with_id(tid, int(classes[j]), world, frame=frame_index)

@@ -70,3 +70,21 @@ def reidentify(
             out.renamed[tid] = gid
             taken.add(gid)
     return out
+
+
+def instance_ids(track_ids: NDArray[np.int64], alias: dict[int, int]) -> NDArray[np.int64]:
+    """The identity each of a frame's tracks (k,) reports: the global instance it maps into
+    (``alias``: a re-identified second piece, an absorbed instance's track), so that a piece joined
+    to an instance keeps the instance's identity across frames. Ids stay unique in the frame: a
+    track that is its own instance keeps its id, and a second track mapping into an instance
+    already reported this frame keeps its own. -> (k,) int64."""
+    ids = np.asarray(track_ids, dtype=np.int64)
+    owners = {int(t) for t in ids.tolist() if int(t) not in alias}
+    out = ids.copy()
+    used: set[int] = set()
+    for j, t in enumerate(ids.tolist()):
+        target = alias.get(int(t))
+        if target is not None and target not in owners and target not in used:
+            out[j] = target
+            used.add(target)
+    return out

@@ -66,7 +66,8 @@ class StepResult:
     """What one mapping step produced.
 
     detections: the frame's detections (after the method's score threshold);
-    track_ids (k,) int64: the track id given to each detection (-1 where the method gives none);
+    track_ids (k,) int64: the identity given to each detection, a track id (IC-Mapper: the global
+        instance its track maps into, unique in the frame) or -1 where the method gives none;
     points (k, 20, 2) float32 ego: the instance geometry after fusion (== detections.points for
     methods without fusion); inserted / merged: global-map ids touched this frame.
     """
