@@ -72,7 +72,7 @@ def test_view_transformer_keeps_the_geometry_of_the_same_cameras() -> None:
     assert vt._geometry is not first
     second = vt._geometry
     check(torch.randn(2, 6, 16, 4, 11))  # another feature size: made anew
-    assert vt._geometry is not second and vt._geometry.feat_size == (4, 11)
+    assert vt._geometry is not second and vt._geometry.cameras.feat_size == (4, 11)
     intr, c2e = intr[:1], c2e[:1]  # another batch size
     check(feats[:1])
     assert vt._geometry.ib.max() == 0

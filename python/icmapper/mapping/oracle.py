@@ -92,36 +92,17 @@ class OracleNoise:
             ) from None
 
 
+# The named noise levels as a table, one row each; the columns are OracleNoise's fields in order:
+# jitter_std, offset_std, drop_rate, partial_rate, partial_min, false_rate, score_true,
+# score_false, score_std, pose_xy_std, pose_yaw_std.
 _PRESETS: dict[str, OracleNoise] = {
-    "none": OracleNoise(
-        jitter_std=0.0,
-        drop_rate=0.0,
-        partial_rate=0.0,
-        false_rate=0.0,
-        score_true=1.0,
-        score_std=0.0,
-    ),
-    "low": OracleNoise(jitter_std=0.1, drop_rate=0.05, partial_rate=0.05, false_rate=0.05),
-    "medium": OracleNoise(
-        jitter_std=0.2,
-        offset_std=0.1,
-        drop_rate=0.1,
-        partial_rate=0.15,
-        false_rate=0.3,
-        score_std=0.15,
-    ),
-    "high": OracleNoise(
-        jitter_std=0.4,
-        offset_std=0.3,
-        drop_rate=0.25,
-        partial_rate=0.3,
-        false_rate=1.0,
-        score_true=0.7,
-        score_false=0.5,
-        score_std=0.2,
-        pose_xy_std=0.2,
-        pose_yaw_std=0.005,
-    ),
+    name: OracleNoise(*row)
+    for name, row in {
+        "none": (0.0, 0.0, 0.0, 0.0, 0.5, 0.0, 1.0, 0.4, 0.0, 0.0, 0.0),
+        "low": (0.1, 0.0, 0.05, 0.05, 0.5, 0.05, 0.85, 0.4, 0.1, 0.0, 0.0),
+        "medium": (0.2, 0.1, 0.1, 0.15, 0.5, 0.3, 0.85, 0.4, 0.15, 0.0, 0.0),
+        "high": (0.4, 0.3, 0.25, 0.3, 0.5, 1.0, 0.7, 0.5, 0.2, 0.2, 0.005),
+    }.items()
 }
 
 

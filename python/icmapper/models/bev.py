@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import warnings
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import torch
 import torch.nn.functional as F
@@ -126,9 +127,9 @@ class ViewTransformer(nn.Module):
         kept and reused while the same cameras come again (every frame of a drive, every clip of
         a fixed rig): an equality test of the camera tensors instead of the projection, the
         selection of the valid samples and two sorts (the pattern and its transpose)."""
-        key = (intrinsics, cam_to_ego, tuple(image_size), tuple(feat_size))
+        key = Cameras(intrinsics, cam_to_ego, tuple(image_size), tuple(feat_size))
         last = self._geometry
-        if last is not None and last.matches(*key):
+        if last is not None and last.matches(key):
             return last
         # in float32 under autocast too: the sample positions are geometry, and the same cameras
         # must give the same samples with and without autocast
@@ -142,10 +143,10 @@ class ViewTransformer(nn.Module):
         idx, bw = bilinear_corners(grid[ib, ic, icell, iz], ib * ncam + ic, fh, fw)  # (V, 4) each
         rows = ib * n + icell  # (V,) output row of each sample
         pattern = sample_pattern(rows, idx, b * n, b * ncam * fh * fw)
-        self._geometry = SampleGeometry(
-            intrinsics.detach().clone(), cam_to_ego.detach().clone(), tuple(image_size),
-            tuple(feat_size), ib, icell, ic, iz, rows, idx, bw, pattern,
-        )  # fmt: skip
+        made_for = key._replace(
+            intrinsics=intrinsics.detach().clone(), cam_to_ego=cam_to_ego.detach().clone()
+        )
+        self._geometry = SampleGeometry(made_for, ib, icell, ic, iz, rows, idx, bw, pattern)
         return self._geometry
 
     def forward(
@@ -256,6 +257,16 @@ def sample_pattern(
     return SamplePattern(crow, col, inverse, t_crow, row[t_order], t_order, num_rows, num_px)
 
 
+class Cameras(NamedTuple):
+    """The cameras and sizes the view transformer's samples are made for: intrinsics
+    (B, N_cam, 3, 3), cam_to_ego (B, N_cam, 4, 4), the image size and the feature maps' (h, w)."""
+
+    intrinsics: torch.Tensor
+    cam_to_ego: torch.Tensor
+    image_size: tuple[int, int]
+    feat_size: tuple[int, int]
+
+
 @dataclass(frozen=True)
 class SampleGeometry:
     """What the view transformer's sampling takes from the cameras alone (``ViewTransformer
@@ -263,10 +274,7 @@ class SampleGeometry:
     BEV-cell order; their output rows (V,); their bilinear corners and weights (V, 4) on the
     stacked feature maps; the pattern of their sums."""
 
-    intrinsics: torch.Tensor  # (B, N_cam, 3, 3) the cameras it was made for
-    cam_to_ego: torch.Tensor  # (B, N_cam, 4, 4)
-    image_size: tuple[int, int]
-    feat_size: tuple[int, int]
+    cameras: Cameras  # the cameras and sizes it was made for
     ib: torch.Tensor
     icell: torch.Tensor
     ic: torch.Tensor
@@ -276,22 +284,17 @@ class SampleGeometry:
     bw: torch.Tensor
     pattern: SamplePattern
 
-    def matches(
-        self,
-        intrinsics: torch.Tensor,
-        cam_to_ego: torch.Tensor,
-        image_size: tuple[int, int],
-        feat_size: tuple[int, int],
-    ) -> bool:
+    def matches(self, cameras: Cameras) -> bool:
         """Whether these are the cameras and sizes it was made for (equal values), and it may be
         used here: one made under ``torch.inference_mode`` cannot be saved for a backward."""
         if self.idx.is_inference() and not torch.is_inference_mode_enabled():
             return False
+        mine = self.cameras
         return (
-            image_size == self.image_size
-            and feat_size == self.feat_size
-            and _same(intrinsics, self.intrinsics)
-            and _same(cam_to_ego, self.cam_to_ego)
+            cameras.image_size == mine.image_size
+            and cameras.feat_size == mine.feat_size
+            and _same(cameras.intrinsics, mine.intrinsics)
+            and _same(cameras.cam_to_ego, mine.cam_to_ego)
         )
 
 
