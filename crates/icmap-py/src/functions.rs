@@ -40,17 +40,29 @@ pub fn resample<'py>(
     points_op(py, || geom::resample(&pts, n, closed))
 }
 
-/// Points about `spacing` apart by arc length.
-#[pyfunction]
-#[pyo3(signature = (points, spacing = 1.0, closed = false))]
-pub fn resample_spacing<'py>(
-    py: Python<'py>,
-    points: &Bound<'py, PyAny>,
-    spacing: f64,
-    closed: bool,
-) -> PyResult<Bound<'py, PyArray2<f64>>> {
-    let pts = points_arg(points, "points")?;
-    points_op(py, || geom::resample_spacing(&pts, spacing, closed))
+/// A module function `name(points, a = default, b = default)` of one point array and two
+/// settings whose core function `geom::name(&points, a, b)` returns points: the conversion of
+/// `points`, then `points_op`.
+macro_rules! points_and_two_settings {
+    ($(#[doc = $doc:tt])* $name:ident($a:ident: $ta:ident = $da:tt, $b:ident: $tb:ident = $db:tt)) => {
+        $(#[doc = $doc])*
+        #[pyfunction]
+        #[pyo3(signature = (points, $a = $da, $b = $db))]
+        pub fn $name<'py>(
+            py: Python<'py>,
+            points: &Bound<'py, PyAny>,
+            $a: $ta,
+            $b: $tb,
+        ) -> PyResult<Bound<'py, PyArray2<f64>>> {
+            let pts = points_arg(points, "points")?;
+            points_op(py, || geom::$name(&pts, $a, $b))
+        }
+    };
+}
+
+points_and_two_settings! {
+    /// Points about `spacing` apart by arc length.
+    resample_spacing(spacing: f64 = 1.0, closed: bool = false)
 }
 
 /// The parts of `points` inside the patch of `pose`, same frame as the input.
@@ -101,17 +113,9 @@ pub fn splice_polyline<'py>(
     points_op(py, || geom::splice_polyline(&a, &b, overlap))
 }
 
-/// Smoothing cubic spline fit (scipy `splprep(s=s)` semantics), evaluated about `spacing` apart.
-#[pyfunction]
-#[pyo3(signature = (points, s = 0.5, spacing = 1.0))]
-pub fn fit_curve<'py>(
-    py: Python<'py>,
-    points: &Bound<'py, PyAny>,
-    s: f64,
-    spacing: f64,
-) -> PyResult<Bound<'py, PyArray2<f64>>> {
-    let pts = points_arg(points, "points")?;
-    points_op(py, || geom::fit_curve(&pts, s, spacing))
+points_and_two_settings! {
+    /// Smoothing cubic spline fit (scipy `splprep(s=s)` semantics), evaluated about `spacing` apart.
+    fit_curve(s: f64 = 0.5, spacing: f64 = 1.0)
 }
 
 /// Merges a detected polyline into a global one (Algorithm 2); keeps the global direction.

@@ -6,7 +6,7 @@ use super::knots::{add_knot, full_knots, interpolation_knots, interval_residuals
 use super::lsq_normal::lsq_fit_cubic_normal;
 use super::lsq_poly::fit_cubic_polynomial;
 use super::lsq_qr::lsq_fit;
-use super::smoothing::smooth_on_knots;
+use super::smoothing::{smooth_on_knots, NEGLIGIBLE_ROW};
 use super::spline::{make_curve, SplineCurve};
 use super::TOL;
 use crate::error::{GeomError, Result};
@@ -102,7 +102,7 @@ fn fit_on_interpolation_knots(u: &[f64], x: &[[f64; 2]], k: usize, s: f64) -> Sp
     if fit0.fp - s <= 0.0 {
         return make_curve(t0, fit0.c, k, u, fit0.fp);
     }
-    smooth_on_knots(t, &fit, u, k, s, fit0.fp, fpms)
+    smooth_on_knots(t, &fit, u, k, s, fit0.fp, fpms, NEGLIGIBLE_ROW)
 }
 
 /// FITPACK `fppara` with `iopt = 0`, unit weights, `idim = 2`.
@@ -197,7 +197,7 @@ fn fit_parametric(u: &[f64], x: &[[f64; 2]], k: usize, s: f64) -> SplineCurve {
         }
     };
 
-    smooth_on_knots(t, &fit, u, k, s, fp0, fpms)
+    smooth_on_knots(t, &fit, u, k, s, fp0, fpms, NEGLIGIBLE_ROW)
 }
 
 #[cfg(test)]

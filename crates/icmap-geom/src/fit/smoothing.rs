@@ -8,11 +8,11 @@ use super::spline::{make_curve, SplineCurve};
 use super::{MAXIT, TOL};
 
 /// Relative size (to the least diagonal entry of R) below which a smoothing row counts as
-/// eliminated in [`smooth_on_knots`]: 2^-100, far below where the differences to FITPACK's full
-/// rotations (about 1e-12 of the curve's extent on a 3 km curve of 400 knots, the size of the
-/// rounding noise of that system) would come from the cut rather than from the order of the
-/// arithmetic.
-const NEGLIGIBLE_ROW: f64 = 7.888609052210118e-31; // 2^-100
+/// eliminated in [`smooth_on_knots`] (as the fits call it): 2^-100, far below where the
+/// differences to FITPACK's full rotations (about 1e-12 of the curve's extent on a 3 km curve of
+/// 400 knots, the size of the rounding noise of that system) would come from the cut rather than
+/// from the order of the arithmetic.
+pub(super) const NEGLIGIBLE_ROW: f64 = 7.888609052210118e-31; // 2^-100
 
 /// Discontinuity jumps of the k-th derivative of the B-splines at the interior knots (FITPACK
 /// `fpdisc`): one row of `k + 2` entries per interior knot, row `r` acting on coefficients
@@ -66,23 +66,10 @@ fn rational_step(p1: &mut f64, f1: &mut f64, p2: f64, f2: f64, p3: &mut f64, f3:
 
 /// FITPACK `fppara` part 2: with the knots `t` fixed (least-squares fit `fit` with `fp - s =
 /// fpms < 0`; `fp0` the least-squares polynomial's `fp`), the smoothing weight `p` with
-/// `fp(p) = s`.
-pub(super) fn smooth_on_knots(
-    t: Vec<f64>,
-    fit: &LsqFit,
-    u: &[f64],
-    k: usize,
-    s: f64,
-    fp0: f64,
-    fpms: f64,
-) -> SplineCurve {
-    smooth_on_knots_cut(t, fit, u, k, s, fp0, fpms, NEGLIGIBLE_ROW)
-}
-
-/// [`smooth_on_knots`] with the relative size `negligible_row` below which a smoothing row counts
-/// as eliminated (0: FITPACK's full rotations).
+/// `fp(p) = s`. `negligible_row`: the relative size below which a smoothing row counts as
+/// eliminated ([`NEGLIGIBLE_ROW`]; 0: FITPACK's full rotations).
 #[allow(clippy::too_many_arguments)]
-fn smooth_on_knots_cut(
+pub(super) fn smooth_on_knots(
     t: Vec<f64>,
     fit: &LsqFit,
     u: &[f64],
@@ -289,8 +276,8 @@ mod tests {
         let t0 = full_knots(&[], 3);
         let fp0 = lsq_fit(&t0, 3, &x, &design(&t0, 3, &u)).fp;
         let s = fit.fp + 0.3 * (fp0 - fit.fp);
-        let cut = smooth_on_knots(t.clone(), &fit, &u, 3, s, fp0, fit.fp - s);
-        let full = smooth_on_knots_cut(t, &fit, &u, 3, s, fp0, fit.fp - s, 0.0);
+        let cut = smooth_on_knots(t.clone(), &fit, &u, 3, s, fp0, fit.fp - s, NEGLIGIBLE_ROW);
+        let full = smooth_on_knots(t, &fit, &u, 3, s, fp0, fit.fp - s, 0.0);
         assert!(
             (cut.residual - full.residual).abs() <= 1e-12 * full.residual,
             "fp {} vs {}",
@@ -321,7 +308,7 @@ mod tests {
         assert!(fit.fp < fp0);
         for frac in [0.01, 0.2, 0.5, 0.9] {
             let s = fit.fp + frac * (fp0 - fit.fp);
-            let curve = smooth_on_knots(t.clone(), &fit, &u, 3, s, fp0, fit.fp - s);
+            let curve = smooth_on_knots(t.clone(), &fit, &u, 3, s, fp0, fit.fp - s, NEGLIGIBLE_ROW);
             assert!(
                 (curve.residual - s).abs() <= TOL * s,
                 "fp {} s {s}",
