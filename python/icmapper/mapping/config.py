@@ -68,7 +68,9 @@ class MapperConfig:
     )
     stub_angle: float = _f(45.0, "map_nms: degrees at which a stub crosses the longer divider")
     positional_scale: float = _f(
-        1.0, "metres; positional affinity exp(-chamfer/scale) (no query features, Post-Track)"
+        1.5,
+        "metres; positional affinity exp(-chamfer/scale) (no query features, Post-Track); with "
+        "assoc_threshold 0.5 a link within scale x ln 2 (1.04 m) of a track's last view",
     )
     # ---- IC-Mapper
     detect_threshold: float = _f(0.1, "score of detections reported per frame (evaluated by AP)")
