@@ -10,6 +10,7 @@ import sys
 from pathlib import Path
 
 import icmapper
+import pytest
 
 PACKAGE = Path(icmapper.__file__).resolve().parent
 
@@ -72,3 +73,22 @@ def test_default_checkpoint_is_package_data_and_loads() -> None:
     from icmapper import Mapper
 
     Mapper.from_checkpoint(DEFAULT_CHECKPOINT)  # the weights fit the network they describe
+
+
+def test_export_replaces_the_mapper_settings(tmp_path: Path) -> None:
+    """``export_checkpoint(..., mapper=...)`` (``python -m icmapper.models.checkpoint SRC DST
+    --mapper-from CONFIG``): the [mapper] table is replaced, the weights stay bit for bit."""
+    import torch
+    from icmapper.models.checkpoint import export_checkpoint, load_checkpoint, save_checkpoint
+    from icmapper.models.network import checkpoint_mapper_settings
+
+    src, dst = tmp_path / "a.pt", tmp_path / "b.pt"
+    w = {"w": torch.arange(6, dtype=torch.float32)}
+    save_checkpoint(
+        src, model=w, optimizer=None, stage=2, step=7, config={"mapper": {"min_hits": 1}}
+    )
+    export_checkpoint(src, dst, {"min_hits": 1, "assoc_threshold": 0.3})
+    assert checkpoint_mapper_settings(dst) == {"min_hits": 1, "assoc_threshold": 0.3}
+    assert torch.equal(load_checkpoint(dst)["model"]["w"], w["w"])
+    with pytest.raises(ValueError, match="must be a table"):
+        export_checkpoint(src, dst, [("min_hits", 1)])  # type: ignore[arg-type]

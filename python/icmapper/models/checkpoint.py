@@ -66,23 +66,40 @@ def load_checkpoint(path: str | Path, map_location: str | torch.device = "cpu") 
     return check_versioned(blob, FORMAT, VERSION, f"checkpoint {path}", "checkpoint")
 
 
-def export_checkpoint(src: str | Path, dst: str | Path) -> None:
+def export_checkpoint(
+    src: str | Path, dst: str | Path, mapper: dict[str, Any] | None = None
+) -> None:
     """Writes an inference checkpoint: ``src`` without optimizer and RNG state (smaller; what the
-    Mapper needs), atomically. Usage: ``python -m icmapper.models.checkpoint SRC DST``."""
+    Mapper needs), atomically. ``mapper``: a ``[mapper]`` table (the mapper settings chosen on
+    validation for this network) that replaces the checkpoint's, so that settings are retuned
+    without retraining. Usage: ``python -m icmapper.models.checkpoint SRC DST [--mapper-from
+    CONFIG.toml]`` (the ``[mapper]`` table of a training config, checked as the training run
+    checks it)."""
     blob = load_checkpoint(src)
+    config = dict(blob["config"])
+    if mapper is not None:
+        if not isinstance(mapper, dict):
+            raise ValueError(f"the [mapper] settings must be a table, got {type(mapper).__name__}")
+        config["mapper"] = dict(mapper)
     save_checkpoint(
         dst,
         model=blob["model"],
         optimizer=None,
         stage=blob["stage"],
         step=blob["step"],
-        config=blob["config"],
+        config=config,
     )
 
 
 if __name__ == "__main__":  # pragma: no cover
     import sys
 
-    if len(sys.argv) != 3:
-        sys.exit("usage: python -m icmapper.models.checkpoint SRC DST")
-    export_checkpoint(sys.argv[1], sys.argv[2])
+    args = sys.argv[1:]
+    if len(args) == 4 and args[2] == "--mapper-from":
+        from icmapper.training.config import load_config
+
+        export_checkpoint(args[0], args[1], load_config(args[3]).mapper)
+    elif len(args) == 2:
+        export_checkpoint(args[0], args[1])
+    else:
+        sys.exit("usage: python -m icmapper.models.checkpoint SRC DST [--mapper-from CONFIG.toml]")
