@@ -40,7 +40,9 @@ def run(detections: str, cities: list[int], seeds: list[int], drives: int, work:
     results = []
     for city in cities:
         base = work / f"base-{detections.replace(':', '-')}-{city}"
-        settings = CitySettings("icmapper", detections, checkpoint, MapperConfig().to_dict(), size)
+        # what `icmapper map --city` maps with: the checkpoint's [mapper] table when learned
+        config = MapperConfig.for_checkpoint(checkpoint) if checkpoint else MapperConfig()
+        settings = CitySettings("icmapper", detections, checkpoint, config.to_dict(), size)
         if not base.exists():
             build_city(base, [f"sim-city:val:{city}:{drives}"], settings, "60x30",
                        pictures=False, log=lambda *_: None, progress=False)  # fmt: skip

@@ -46,12 +46,7 @@ def mapper_config(args: argparse.Namespace) -> MapperConfig:
 
     base = MapperConfig()
     if args.detections == "learned" and args.checkpoint:
-        from icmapper.models.network import checkpoint_mapper_settings, checkpoint_threshold
-
-        base = MapperConfig.from_dict(
-            checkpoint_mapper_settings(args.checkpoint),
-            MapperConfig(detect_threshold=checkpoint_threshold(args.checkpoint)),
-        )
+        base = MapperConfig.for_checkpoint(args.checkpoint)
     table: dict[str, Any] = {
         name: getattr(args, name) for name in CLI_FLAGS if getattr(args, name) is not None
     }

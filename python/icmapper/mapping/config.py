@@ -187,6 +187,18 @@ class MapperConfig:
         return to_plain(self)
 
     @staticmethod
+    def for_checkpoint(path: str) -> MapperConfig:
+        """The config a learned checkpoint maps with: the defaults, its detection threshold and
+        its ``[mapper]`` settings (chosen on validation for that network). The one owner of that
+        rule: ``Mapper.from_checkpoint``, the command line and the experiments use it."""
+        from icmapper.models.network import checkpoint_mapper_settings, checkpoint_threshold
+
+        return MapperConfig.from_dict(
+            checkpoint_mapper_settings(path),
+            MapperConfig(detect_threshold=checkpoint_threshold(path)),
+        )
+
+    @staticmethod
     def help() -> dict[str, str]:
         """Field name -> one-line help with its default (for the command line)."""
         return {

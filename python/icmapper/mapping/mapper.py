@@ -130,15 +130,13 @@ class Mapper:
         ``fusion_margin`` and ``history_points`` always come from the fusion network (a config
         that sets other values raises ValueError).
         """
-        from icmapper.models.network import checkpoint_mapper_settings, load_network
+        from icmapper.models.network import load_network
 
         if variant not in VARIANTS:
             raise ValueError(f"unknown variant {variant!r}; expected one of {sorted(VARIANTS)}")
         loaded = load_network(path, device)
         v = VARIANTS[variant]
-        cfg = config or MapperConfig.from_dict(
-            checkpoint_mapper_settings(path), MapperConfig(detect_threshold=loaded.score_threshold)
-        )
+        cfg = config or MapperConfig.for_checkpoint(str(path))
         cfg = replace(
             network_settings(cfg, loaded.model.fusion_margin, loaded.model.fusion_history_points),
             use_association=v.use_association,
