@@ -25,8 +25,10 @@ def absorb_pairs(
     two kerbs of a road lie that close), the other classes with ``absorb_gate`` (lane lines lie
     3 m apart). An instance only absorbs neighbours of its own class, so the two calls are the
     per-class rule. Returns the (absorbed, kept) pairs in order."""
-    bounds = [i for i in ids if int(global_map.get(i)[0]) == MapClass.BOUNDARY]
-    others = [i for i in ids if int(global_map.get(i)[0]) != MapClass.BOUNDARY]
+    bounds: list[int] = []
+    others: list[int] = []
+    for i in ids:
+        (bounds if int(global_map.get(i)[0]) == MapClass.BOUNDARY else others).append(i)
     pairs: list[tuple[int, int]] = []
     for group, gate in ((others, config.absorb_gate), (bounds, config.absorb_boundary_gate)):
         if group:

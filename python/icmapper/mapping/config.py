@@ -191,12 +191,10 @@ class MapperConfig:
         """The config a learned checkpoint maps with: the defaults, its detection threshold and
         its ``[mapper]`` settings (chosen on validation for that network). The one owner of that
         rule: ``Mapper.from_checkpoint``, the command line and the experiments use it."""
-        from icmapper.models.network import checkpoint_mapper_settings, checkpoint_threshold
+        from icmapper.models.network import checkpoint_mapper_defaults
 
-        return MapperConfig.from_dict(
-            checkpoint_mapper_settings(path),
-            MapperConfig(detect_threshold=checkpoint_threshold(path)),
-        )
+        table, threshold = checkpoint_mapper_defaults(path)
+        return MapperConfig.from_dict(table, MapperConfig(detect_threshold=threshold))
 
     @staticmethod
     def help() -> dict[str, str]:

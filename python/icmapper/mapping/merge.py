@@ -101,13 +101,13 @@ def merge_frame(
             )
             commit(tid, target, world, change)
             continue
-        # a confident first sighting goes in at once; a crossing only when it is more than a
-        # sliver at the range edge (mapping.crossings.confirmable)
-        confident = scores[j] >= config.confirm_score and (
-            not crossing or crossings.confirmable(fused[j])
-        )
-        if tracker.track(tid).hits < config.min_hits and not confident:
-            continue  # tentative track: not in the map until confirmed
+        # a tentative track stays out of the map until confirmed, unless its sighting is
+        # confident: a crossing then only when more than a sliver at the range edge
+        tentative = tracker.track(tid).hits < config.min_hits
+        if tentative and not (
+            scores[j] >= config.confirm_score and (not crossing or crossings.confirmable(fused[j]))
+        ):
+            continue
         try:
             global_map.insert_with_id(tid, int(classes[j]), world, frame=frame_index)
         except ValueError as exc:  # degenerate geometry (e.g. a collapsed detection)

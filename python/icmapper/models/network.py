@@ -115,13 +115,24 @@ def checkpoint_training_source(path: str | Path) -> str:
     return str(data.get("source", "")) if isinstance(data, dict) else ""
 
 
-def checkpoint_mapper_settings(path: str | Path) -> dict[str, Any]:
-    """The mapper settings a checkpoint carries (its training config's ``[mapper]`` table, as
-    chosen on validation for this network; empty when it has none)."""
-    table = load_checkpoint(path)["config"].get("mapper", {})
+def _mapper_table(config: dict[str, Any], path: str | Path) -> dict[str, Any]:
+    table = config.get("mapper", {})
     if not isinstance(table, dict):
         raise ValueError(f"checkpoint {path}: config [mapper] must be a table")
     return dict(table)
+
+
+def checkpoint_mapper_settings(path: str | Path) -> dict[str, Any]:
+    """The mapper settings a checkpoint carries (its training config's ``[mapper]`` table, as
+    chosen on validation for this network; empty when it has none)."""
+    return _mapper_table(load_checkpoint(path)["config"], path)
+
+
+def checkpoint_mapper_defaults(path: str | Path) -> tuple[dict[str, Any], float]:
+    """The ``[mapper]`` table and the detection score threshold of a checkpoint, from one read
+    of the file (what ``MapperConfig.for_checkpoint`` starts from)."""
+    config = load_checkpoint(path)["config"]
+    return _mapper_table(config, path), read_network_settings(config, path)[3]
 
 
 def checkpoint_threshold(path: str | Path) -> float:
