@@ -23,7 +23,14 @@ from typing import Any
 import numpy as np
 
 
-def run(detections: str, cities: list[int], seeds: list[int], drives: int, work: Path) -> dict:
+def run(
+    detections: str,
+    cities: list[int],
+    seeds: list[int],
+    drives: int,
+    work: Path,
+    checkpoint: str | None = None,
+) -> dict:
     from icmapper.city.drives import CitySettings
     from icmapper.city.run import build_city
     from icmapper.city.update_eval import CHANGE_TYPES, evaluate_update
@@ -31,8 +38,9 @@ def run(detections: str, cities: list[int], seeds: list[int], drives: int, work:
     from icmapper.data.types import CLASS_NAMES
     from icmapper.mapping.config import MapperConfig
 
-    checkpoint = None
-    if detections == "learned":
+    if detections != "learned":
+        checkpoint = None
+    elif checkpoint is None:
         from icmapper.checkpoints import DEFAULT_CHECKPOINT
 
         checkpoint = str(DEFAULT_CHECKPOINT)
@@ -130,13 +138,16 @@ def main() -> None:
     ap.add_argument("--cities", nargs="+", type=int, default=[0, 1])
     ap.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2, 3, 4])
     ap.add_argument("--drives", type=int, default=3)
+    ap.add_argument(
+        "--checkpoint", default=None, help="for learned detections (default: the shipped one)"
+    )
     ap.add_argument("--work", default=None, help="folder for the city runs (default: a temp one)")
     ap.add_argument("--json", default=None)
     args = ap.parse_args()
     work = Path(args.work or tempfile.mkdtemp(prefix="city-update-"))
     outs = []
     for det in args.detections:
-        out = run(det, args.cities, args.seeds, args.drives, work)
+        out = run(det, args.cities, args.seeds, args.drives, work, args.checkpoint)
         print(table(out))
         outs.append(out)
     if args.json:

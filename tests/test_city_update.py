@@ -144,6 +144,27 @@ def _observed(stored: WorldMap, now: WorldMap, drive: int = 7) -> ChangeDetector
     return det
 
 
+def test_repainted_training_drives_keep_the_route_and_change_the_paint() -> None:
+    plain = open_source("sim:train:3", render=False)
+    seqs = open_source("sim-repainted:train:3", render=False)
+    again = open_source("sim-repainted:train:3", render=False)
+    assert [s.name for s in seqs] == [p.name.replace("sim-", "sim-repainted-") for p in plain]
+    changed_lines = 0
+    for p, s, a in zip(plain, seqs, again, strict=True):
+        np.testing.assert_array_equal(p.poses, s.poses)  # the same route through the same lanes
+        assert s.world.lanes.keys() == p.world.lanes.keys()
+        old = {m.id: m.points for m in p.world.instances if m.cls == MapClass.DIVIDER}
+        new = {m.id: m.points for m in s.world.instances if m.cls == MapClass.DIVIDER}
+        assert {i: v.tolist() for i, v in new.items()} == {
+            i: v.tolist() for i, v in ((m.id, m.points) for m in a.world.instances) if i in new
+        }  # deterministic
+        moved = sum(i in old and not np.array_equal(old[i], new[i]) for i in new)
+        changed_lines += len(old.keys() - new.keys()) + len(new.keys() - old.keys()) + moved
+    assert changed_lines >= 3 * 3  # several lane lines per drive no longer where the lanes are
+    with pytest.raises(ValueError, match=r"sim-repainted:<train\|val\|test>\[:N\]"):
+        open_source("sim-repainted:train:1:2")
+
+
 def test_moves_relative_to_the_reference() -> None:
     """A detector that draws a line 0.6 m off the map (its bias there, seen by the city's own
     drives: the reference) reports no move for it; a move of 1 m beyond the bias is reported

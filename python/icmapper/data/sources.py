@@ -299,6 +299,18 @@ def _open_sim_city_changed(spec: str, rest: str, o: SourceOptions) -> list[Seque
     return changed_city_drives(parts[0], index, num, seed, image_size=o.image_size)[0]
 
 
+def _open_sim_repainted(spec: str, rest: str, o: SourceOptions) -> list[Sequence]:
+    from icmapper.data.sim.changes import repainted_sequences
+
+    parts = rest.split(":")
+    if parts[0] not in SIM_SPLITS or len(parts) > 2:
+        raise ValueError(
+            f"bad source spec {spec!r}: expected sim-repainted:<{'|'.join(SIM_SPLITS)}>[:N]"
+        )
+    n = _count(parts[1], spec) if len(parts) == 2 else DEFAULT_SIM_COUNT
+    return repainted_sequences(parts[0], n, seed=o.seed, image_size=o.image_size)
+
+
 def _open_av2(spec: str, rest: str, o: SourceOptions) -> list[Sequence]:
     from icmapper.data import av2
     from icmapper.data.errors import DataError
@@ -387,6 +399,15 @@ register_source(
         "the N drives of sim-city:<split>:INDEX:N through that city after changes near them "
         "(seeded; the true changes: icmapper.data.sim.changes)",
         _open_sim_city_changed,
+    )
+)
+register_source(
+    SourceKind(
+        "sim-repainted",
+        "sim-repainted:<split>[:N]",
+        "the N drives of sim:<split>:N, each through its city with lane lines removed, added and "
+        "moved near it (paint that departs from the lane layout; for training)",
+        _open_sim_repainted,
     )
 )
 register_source(

@@ -404,6 +404,45 @@ def changed_city_drives(
     return out, list(changes)
 
 
+#: The changes of each repainted training drive (``sim-repainted``), in two passes (each keeps
+#: its changes CHANGE_SPACING apart, so the moves and additions of the first get their places
+#: before the removals): more lane lines than a city update's, so that the paint departs from
+#: the lane layout in many frames.
+REPAINT_COUNTS = (
+    ChangeCounts(0, 0, 0, divider_added=2, divider_moved=4, kerb_moved=0),
+    ChangeCounts(divider_removed=2, divider_added=0, divider_moved=0),
+)
+
+
+def repainted_sequences(
+    split: str,
+    num: int,
+    seed: int = 0,
+    image_size: tuple[int, int] = (128, 352),
+    counts: tuple[ChangeCounts, ...] = REPAINT_COUNTS,
+) -> list[Sequence]:
+    """The drives of ``sim_sequences(split, num, seed)`` (the same cities, routes and lighting),
+    each through its city changed by ``change_world`` near that drive (one pass per entry of
+    ``counts``; seeded by the city and the drive), named "sim-repainted-<city>-<drive>"
+    (source ``sim-repainted``). For training: the lane layout stays, the paint does not follow
+    it, so a detector learns the lines from the paint."""
+    from icmapper.data.sim.city import generate_city
+    from icmapper.data.sim.sequences import sim_city_seeds, sim_sequence
+
+    out = []
+    for k, city in enumerate(sim_city_seeds(split, num, seed)):
+        world = generate_city(city)
+        plain = sim_sequence(city, k, (8, 8), world=world)
+        changed = world
+        for p, c in enumerate(counts):
+            pass_seed = (city * 4099 + k) * 7 + p
+            changed, _ = change_world(changed, plain.poses, seed=pass_seed, counts=c)
+        seq = sim_sequence(city, k, image_size, world=changed)
+        seq.name = f"sim-repainted-{city}-{k}"
+        out.append(seq)
+    return out
+
+
 def spec_true_changes(spec: str) -> list[TrueChange] | None:
     """The true changes of the drives of a ``sim-city-changed:<split>:INDEX:N[:SEED]`` spec (as
     ``open_source`` reads it); None for a spec of another kind (no known changes)."""

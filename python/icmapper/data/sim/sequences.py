@@ -49,6 +49,19 @@ def sim_sequence(
     return Sequence(name, "sim", world, timestamps, poses, rig, render)
 
 
+def sim_city_seeds(split: str, num: int, seed: int = 0) -> list[int]:
+    """The city seeds of ``sim_sequences(split, num, seed)``'s drives, in order (drive seed =
+    position): drawn from the split's range with ``seed``, without repeats while it has enough."""
+    if split not in CITY_SEEDS:
+        raise ValueError(f"unknown split {split!r}; expected one of {sorted(CITY_SEEDS)}")
+    if num < 0:
+        raise ValueError(f"num must be >= 0, got {num}")
+    cities = CITY_SEEDS[split]
+    rng = np.random.default_rng([int(seed), 0x5E9])
+    picks = rng.choice(len(cities), size=num, replace=num > len(cities))
+    return [int(cities[int(p)]) for p in picks]
+
+
 def sim_sequences(
     split: str,
     num: int,
@@ -62,17 +75,9 @@ def sim_sequences(
     each (drive seed = position in the list). Each city is generated once (``varied``: the cities
     with real-road variety; ``junctions``: those with crossings ringing the junctions;
     ``generate_city``)."""
-    if split not in CITY_SEEDS:
-        raise ValueError(f"unknown split {split!r}; expected one of {sorted(CITY_SEEDS)}")
-    if num < 0:
-        raise ValueError(f"num must be >= 0, got {num}")
-    cities = CITY_SEEDS[split]
-    rng = np.random.default_rng([int(seed), 0x5E9])
-    picks = rng.choice(len(cities), size=num, replace=num > len(cities))
     worlds: dict[int, WorldMap] = {}
     out = []
-    for k, p in enumerate(picks):
-        city = cities[int(p)]
+    for k, city in enumerate(sim_city_seeds(split, num, seed)):
         if city not in worlds:
             worlds[city] = generate_city(city, varied, junctions)
         out.append(
