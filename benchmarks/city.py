@@ -42,10 +42,10 @@ def main(argv: list[str] | None = None) -> int:
     spec = f"sim-city:{args.city}:{args.drives}"
     if args.detections == "learned":
         from icmapper.checkpoints import DEFAULT_CHECKPOINT
-        from icmapper.models.network import checkpoint_settings, checkpoint_threshold
+        from icmapper.models.network import checkpoint_settings
 
         ckpt = str(args.checkpoint or DEFAULT_CHECKPOINT)
-        config = MapperConfig(detect_threshold=checkpoint_threshold(ckpt))
+        config = MapperConfig.for_checkpoint(ckpt)  # as `icmapper map --city` maps
         settings = CitySettings(
             args.method, "learned", ckpt, config.to_dict(), checkpoint_settings(ckpt)[1]
         )

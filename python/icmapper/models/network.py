@@ -133,9 +133,3 @@ def checkpoint_mapper_defaults(path: str | Path) -> tuple[dict[str, Any], float]
     of the file (what ``MapperConfig.for_checkpoint`` starts from)."""
     config = load_checkpoint(path)["config"]
     return _mapper_table(config, path), read_network_settings(config, path)[3]
-
-
-def checkpoint_threshold(path: str | Path) -> float:
-    """The detection score threshold a checkpoint was trained with."""
-    blob = load_checkpoint(path)
-    return read_network_settings(blob["config"], path)[3]
