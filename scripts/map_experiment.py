@@ -10,7 +10,8 @@ map's cleanliness (``eval.fragmentation``); ``--json`` writes them.
     .venv/bin/python scripts/map_experiment.py --source sim:val:4 \
         --methods icmapper,post-track,polymerge --set map_nms=true
 
-A cached BEV belongs to its checkpoint and source; delete the cache when either changes.
+A cached BEV belongs to its checkpoint (the file's bytes) and source: a retrained checkpoint at
+the same path gets its own.
 """
 
 from __future__ import annotations
@@ -127,7 +128,8 @@ def main(argv: list[str] | None = None) -> int:
     from icmapper.models.network import checkpoint_settings
 
     seqs = open_source(a.source, image_size=checkpoint_settings(a.checkpoint)[1])
-    key = hashlib.sha1(f"{Path(a.checkpoint).resolve()}|{a.source}".encode()).hexdigest()[:10]
+    weights = hashlib.sha1(Path(a.checkpoint).read_bytes()).hexdigest()
+    key = hashlib.sha1(f"{weights}|{a.source}".encode()).hexdigest()[:10]
     cache = Path(a.cache) / key
     mapper = Mapper.from_checkpoint(a.checkpoint)
     cfg = MapperConfig.from_dict(_parse_sets(a.set, MapperConfig), mapper.config)
