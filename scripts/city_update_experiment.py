@@ -30,9 +30,11 @@ def run(
     drives: int,
     work: Path,
     checkpoint: str | None = None,
+    update: dict[str, Any] | None = None,
 ) -> dict:
     from icmapper.city.drives import CitySettings
     from icmapper.city.run import build_city
+    from icmapper.city.update import UpdateConfig
     from icmapper.city.update_eval import CHANGE_TYPES, evaluate_update
     from icmapper.city.update_run import update_city
     from icmapper.data.types import CLASS_NAMES
@@ -60,7 +62,8 @@ def run(
             shutil.copytree(base, upd)
             spec = f"sim-city-changed:val:{city}:{drives}:{seed}"
             update_city(upd, [spec], detections, checkpoint, image_size=size,
-                        log=lambda *_: None, progress=False)  # fmt: skip
+                        config=UpdateConfig(**(update or {})), log=lambda *_: None,
+                        progress=False)  # fmt: skip
             r = evaluate_update(upd, image_size=size)
             r["city"], r["seed"] = city, seed
             results.append(r)
@@ -105,6 +108,13 @@ def run(
     }
 
 
+def _update_setting(text: str) -> tuple[str, Any]:
+    """NAME=VALUE of an ``UpdateConfig`` field: a number, or per-class numbers "a,b,c"."""
+    name, _, value = text.partition("=")
+    nums = tuple(float(v) for v in value.split(","))
+    return name, nums if len(nums) > 1 else nums[0]
+
+
 def table(out: dict) -> str:
     lines = [
         f"### {out['detections']} ({out['updates']} updates)",
@@ -141,13 +151,21 @@ def main() -> None:
     ap.add_argument(
         "--checkpoint", default=None, help="for learned detections (default: the shipped one)"
     )
+    ap.add_argument(
+        "--update",
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
+        help="an UpdateConfig setting (per class: a,b,c; e.g. remove_drop=inf,inf,inf)",
+    )
     ap.add_argument("--work", default=None, help="folder for the city runs (default: a temp one)")
     ap.add_argument("--json", default=None)
     args = ap.parse_args()
     work = Path(args.work or tempfile.mkdtemp(prefix="city-update-"))
     outs = []
     for det in args.detections:
-        out = run(det, args.cities, args.seeds, args.drives, work, args.checkpoint)
+        update = dict(_update_setting(t) for t in args.update)
+        out = run(det, args.cities, args.seeds, args.drives, work, args.checkpoint, update)
         print(table(out))
         outs.append(out)
     if args.json:

@@ -24,7 +24,9 @@ Per frame and class, with the stored instances of the range and the detections (
 Decisions (``decide``), from all frames of all drives observed:
 
 - removed: an instance expected in >= ``remove_frames`` frames and missed in at least
-  ``remove_share`` of them;
+  ``remove_share`` of them; or, with a ``reference`` (below) and for the classes with a finite
+  ``remove_drop``, one that did not move and was missed at ``remove_gate`` (a tighter gate) in a
+  share of its frames at least ``remove_drop`` above the reference's share;
 - moved (polylines): stored points with >= ``move_obs`` offsets whose median is beyond
   ``move_threshold`` (the noise; per class), in a run of >= ``move_length`` m (per class); when
   the run holds most of the observed points the whole line moves by the run's median, else the
@@ -73,6 +75,8 @@ class UpdateConfig:
     seen_share: float = 0.3
     remove_frames: int = 3
     remove_share: float = 0.8
+    remove_drop: tuple[float, float, float] = (np.inf, 0.25, np.inf)  # per class
+    remove_gate: float = 1.0
     move_threshold: tuple[float, float, float] = (np.inf, 0.4, 1.0)  # per class
     move_obs: int = 3
     move_length: tuple[float, float, float] = (np.inf, 4.0, 8.0)  # per class
@@ -82,7 +86,11 @@ class UpdateConfig:
     add_share: float = 0.5
 
     def __post_init__(self) -> None:
-        for name in ("margin", "min_add_length", "add_gate"):
+        if len(self.remove_drop) != 3 or not all(x > 0 for x in self.remove_drop):
+            raise ValueError(
+                f"UpdateConfig.remove_drop must be 3 values > 0, got {self.remove_drop}"
+            )
+        for name in ("margin", "min_add_length", "add_gate", "remove_gate"):
             v = getattr(self, name)
             if not (np.isfinite(v) and v >= 0):
                 raise ValueError(f"UpdateConfig.{name} must be finite and >= 0, got {v}")
@@ -186,6 +194,10 @@ class _Stored:
     obs_idx: list[NDArray[np.int64]] = field(default_factory=list)  # per frame: point indices
     obs_off: list[NDArray[np.float64]] = field(default_factory=list)  # per frame: offsets
     obs_keys: list[FrameKey] = field(default_factory=list)
+    near_missed: int = 0  # expected frames without a detection within remove_gate
+
+    def near_missed_share(self) -> float:
+        return self.near_missed / max(len(self.evidence.expected), 1)
 
 
 @dataclass
@@ -283,9 +295,12 @@ class ChangeDetector:
             idx = np.flatnonzero(expected)  # (e,)
             if tree is None:
                 s.evidence.missed.append(key)
+                s.near_missed += 1
                 continue
             dist, j = tree.query(s.points[idx], distance_upper_bound=gate)  # (e,), (e,)
             hit = np.isfinite(dist)  # (e,)
+            if np.mean(dist <= cfg.remove_gate) < cfg.seen_share:
+                s.near_missed += 1
             if hit.mean() >= cfg.seen_share:
                 s.evidence.seen.append(key)
             else:
@@ -351,7 +366,7 @@ class ChangeDetector:
     def decide(self, reference: ChangeDetector | None = None) -> list[Change]:
         """The confirmed changes (removals, moves, then additions; by instance id / first
         sighting). ``reference``: the detector fed with the city's own drives against the same
-        map (module docstring): moves relative to its offsets."""
+        map (module docstring): moves relative to its offsets, removals relative to its misses."""
         out: list[Change] = []
         moves: list[Change] = []
         for i in sorted(self.stored):
@@ -365,13 +380,15 @@ class ChangeDetector:
             ):
                 out.append(Change("removed", s.cls, i, s.points, s.closed, ev))
                 continue
+            ref = reference.stored.get(i) if reference is not None else None
+            move = None
             if not s.closed:
-                bias = None
-                if reference is not None and i in reference.stored:
-                    bias = reference._median_offsets(reference.stored[i])
+                bias = None if ref is None else self._median_offsets(ref)
                 move = self._move(i, s, bias)
-                if move is not None:
-                    moves.append(move)
+            if move is not None:
+                moves.append(move)
+            elif self._missed_more_than(s, ref):
+                out.append(Change("removed", s.cls, i, s.points, s.closed, ev))
         out += moves
         for cand in self.candidates:
             ev = cand.evidence
@@ -382,6 +399,19 @@ class ChangeDetector:
                 closed = cand.cls == MapClass.PED_CROSSING
                 out.append(Change("added", cand.cls, -1, pts, closed, ev, new_points=pts))
         return out
+
+    def _missed_more_than(self, s: _Stored, ref: _Stored | None) -> bool:
+        """Whether ``s`` was missed (nothing within ``remove_gate``) in a share of its frames at
+        least ``remove_drop`` (its class's) above the share in which the reference, the same
+        detector on the city's own drives, missed it: a detector that still draws a removed line
+        in some frames, from the lanes around it, misses it more often than before."""
+        drop = self.cfg.remove_drop[s.cls]
+        if ref is None or not np.isfinite(drop):
+            return False
+        k = self.cfg.remove_frames
+        if len(ref.evidence.expected) < k or s.near_missed < k:
+            return False
+        return s.near_missed_share() - ref.near_missed_share() >= drop
 
     def _median_offsets(self, s: _Stored) -> NDArray[np.float64]:
         """(n,) the median sideways offset of each stored point observed in >= ``move_obs``
