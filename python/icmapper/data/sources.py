@@ -220,14 +220,19 @@ def source_tag(spec: str) -> str:
 
 
 # ---------------------------------------------------------------------- the built-in kinds
+def _split_count(kind: str, spec: str, rest: str) -> tuple[str, int]:
+    """The split and drive count of a ``kind:<split>[:N]`` spec (N: DEFAULT_SIM_COUNT)."""
+    parts = rest.split(":")
+    if parts[0] not in SIM_SPLITS or len(parts) > 2:
+        raise ValueError(f"bad source spec {spec!r}: expected {kind}:<{'|'.join(SIM_SPLITS)}>[:N]")
+    return parts[0], _count(parts[1], spec) if len(parts) == 2 else DEFAULT_SIM_COUNT
+
+
 def _open_sim(spec: str, rest: str, o: SourceOptions) -> list[Sequence]:
     from icmapper.data import sim
 
-    parts = rest.split(":")
-    if parts[0] not in SIM_SPLITS or len(parts) > 2:
-        raise ValueError(f"bad source spec {spec!r}: expected sim:<{'|'.join(SIM_SPLITS)}>[:N]")
-    n = _count(parts[1], spec) if len(parts) == 2 else DEFAULT_SIM_COUNT
-    return list(sim.sim_sequences(parts[0], n, seed=o.seed, image_size=o.image_size))
+    split, n = _split_count("sim", spec, rest)
+    return list(sim.sim_sequences(split, n, seed=o.seed, image_size=o.image_size))
 
 
 def _open_sim_variety(kind: str, **variety: bool) -> Callable[..., list[Sequence]]:
@@ -237,13 +242,8 @@ def _open_sim_variety(kind: str, **variety: bool) -> Callable[..., list[Sequence
     def open_(spec: str, rest: str, o: SourceOptions) -> list[Sequence]:
         from icmapper.data import sim
 
-        parts = rest.split(":")
-        if parts[0] not in SIM_SPLITS or len(parts) > 2:
-            raise ValueError(
-                f"bad source spec {spec!r}: expected {kind}:<{'|'.join(SIM_SPLITS)}>[:N]"
-            )
-        n = _count(parts[1], spec) if len(parts) == 2 else DEFAULT_SIM_COUNT
-        return list(sim.sim_sequences(parts[0], n, seed=o.seed, image_size=o.image_size, **variety))
+        split, n = _split_count(kind, spec, rest)
+        return list(sim.sim_sequences(split, n, seed=o.seed, image_size=o.image_size, **variety))
 
     return open_
 
@@ -302,13 +302,8 @@ def _open_sim_city_changed(spec: str, rest: str, o: SourceOptions) -> list[Seque
 def _open_sim_repainted(spec: str, rest: str, o: SourceOptions) -> list[Sequence]:
     from icmapper.data.sim.changes import repainted_sequences
 
-    parts = rest.split(":")
-    if parts[0] not in SIM_SPLITS or len(parts) > 2:
-        raise ValueError(
-            f"bad source spec {spec!r}: expected sim-repainted:<{'|'.join(SIM_SPLITS)}>[:N]"
-        )
-    n = _count(parts[1], spec) if len(parts) == 2 else DEFAULT_SIM_COUNT
-    return repainted_sequences(parts[0], n, seed=o.seed, image_size=o.image_size)
+    split, n = _split_count("sim-repainted", spec, rest)
+    return repainted_sequences(split, n, seed=o.seed, image_size=o.image_size)
 
 
 def _open_av2(spec: str, rest: str, o: SourceOptions) -> list[Sequence]:
