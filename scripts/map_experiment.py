@@ -5,7 +5,9 @@ later runs vary the vectoriser (``--vec NAME=VALUE``, ``models.vectorise.Vectori
 the mapping settings (``--set NAME=VALUE``, ``MapperConfig``) without rendering or encoding again.
 Every method maps the same detections (IC-Mapper's, recorded, replayed to the baselines, as
 ``icmapper compare`` does). Prints, per method, the map error, mGAP, ID switches and the
-map's cleanliness (``eval.fragmentation``); ``--json`` writes them.
+map's cleanliness (``eval.fragmentation``); ``--directions`` the two halves of each class's CD
+(the map's points to the ground truth, the ground truth's to the map) and the stray instances'
+part; ``--json`` writes them.
 
     .venv/bin/python scripts/map_experiment.py --source sim:val:4 \
         --methods icmapper,post-track,polymerge --set map_nms=true
@@ -122,6 +124,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument(
         "--min-obs", type=int, default=1, help="leave out map instances observed fewer times"
     )
+    ap.add_argument(
+        "--directions",
+        action="store_true",
+        help="also the two halves of each class's CD (precision, coverage) and the strays",
+    )
     a = ap.parse_args(argv)
 
     vec = replace(VectoriseParams(), **_parse_sets(a.vec, VectoriseParams))
@@ -200,9 +207,50 @@ def main(argv: list[str] | None = None) -> int:
             + f" | {mp['mCD']:.3f} | {100 * mp['mGAP']:.1f} | {cnt} ({gtc}) | {pcs} | {dup} "
             f"| {stray} |"
         )
+    if a.directions:
+        print(
+            "\n| method | to GT ped/div/bound | from GT | to GT without strays | stray points % |"
+        )
+        print("|---|---|---|---|---|")
+        for n in names:
+            d = cd_directions(maps[n], ggts)
+            cells = ["/".join(f"{v:.3f}" for v in d[k]) for k in ("to", "from", "kept")]
+            stray = "/".join(f"{100 * v:.1f}" for v in d["stray"])
+            print(f"| {n} | " + " | ".join(cells) + f" | {stray} |")
     if a.json:
         Path(a.json).write_text(json.dumps(out, indent=1, default=float))
     return 0
+
+
+def cd_directions(maps: list, ggts: list, far: float = 1.0) -> dict[str, list[float]]:
+    """The two halves of each class's CD, per class (crossing, divider, boundary), averaged over
+    the drives as the CD is: ``to`` (the map's points to the ground truth: precision), ``from``
+    (the ground truth's to the map: coverage), ``kept`` (``to`` without the stray instances,
+    those lying farther than ``far`` metres from the ground truth on average) and ``stray``
+    (their share of the map's points)."""
+    from icmapper.eval.globalmap import dense_sample
+    from scipy.spatial import cKDTree
+
+    out: dict[str, list[float]] = {k: [] for k in ("to", "from", "kept", "stray")}
+    for c in range(3):
+        acc: dict[str, list[float]] = {k: [] for k in out}
+        for items, gt in zip(maps, ggts, strict=True):
+            g = [dense_sample(np.asarray(m.points), m.closed) for m in gt if int(m.cls) == c]
+            p = [dense_sample(np.asarray(pts), closed) for k, pts, closed, _ in items if k == c]
+            if not g or not p:
+                continue
+            tree = cKDTree(np.concatenate(g))
+            d = [tree.query(q)[0] for q in p]  # per instance (m_i,)
+            bad = np.array([float(x.mean()) > far for x in d])  # (instances,)
+            pts = np.concatenate(d)
+            acc["to"].append(float(pts.mean()))
+            acc["from"].append(float(cKDTree(np.concatenate(p)).query(np.concatenate(g))[0].mean()))
+            good = [x for x, b in zip(d, bad, strict=True) if not b]
+            acc["kept"].append(float(np.concatenate(good).mean()) if good else float("nan"))
+            acc["stray"].append(sum(len(x) for x, b in zip(d, bad, strict=True) if b) / len(pts))
+        for k in out:
+            out[k].append(float(np.nanmean(acc[k])) if acc[k] else float("nan"))
+    return out
 
 
 if __name__ == "__main__":
