@@ -222,35 +222,21 @@ def main(argv: list[str] | None = None) -> int:
     return 0
 
 
-def cd_directions(maps: list, ggts: list, far: float = 1.0) -> dict[str, list[float]]:
-    """The two halves of each class's CD, per class (crossing, divider, boundary), averaged over
-    the drives as the CD is: ``to`` (the map's points to the ground truth: precision), ``from``
-    (the ground truth's to the map: coverage), ``kept`` (``to`` without the stray instances,
-    those lying farther than ``far`` metres from the ground truth on average) and ``stray``
-    (their share of the map's points)."""
-    from icmapper.eval.globalmap import dense_sample
-    from scipy.spatial import cKDTree
+def cd_directions(maps: list, ggts: list) -> dict[str, list[float]]:
+    """``eval.globalmap.cd_halves`` per class (crossing, divider, boundary), averaged over the
+    drives as the CD is: ``to``, ``from``, ``kept`` and ``stray``."""
+    from icmapper.eval.globalmap import cd_halves
 
-    out: dict[str, list[float]] = {k: [] for k in ("to", "from", "kept", "stray")}
-    for c in range(3):
-        acc: dict[str, list[float]] = {k: [] for k in out}
-        for items, gt in zip(maps, ggts, strict=True):
-            g = [dense_sample(np.asarray(m.points), m.closed) for m in gt if int(m.cls) == c]
-            p = [dense_sample(np.asarray(pts), closed) for k, pts, closed, _ in items if k == c]
-            if not g or not p:
-                continue
-            tree = cKDTree(np.concatenate(g))
-            d = [tree.query(q)[0] for q in p]  # per instance (m_i,)
-            bad = np.array([float(x.mean()) > far for x in d])  # (instances,)
-            pts = np.concatenate(d)
-            acc["to"].append(float(pts.mean()))
-            acc["from"].append(float(cKDTree(np.concatenate(p)).query(np.concatenate(g))[0].mean()))
-            good = [x for x, b in zip(d, bad, strict=True) if not b]
-            acc["kept"].append(float(np.concatenate(good).mean()) if good else float("nan"))
-            acc["stray"].append(sum(len(x) for x, b in zip(d, bad, strict=True) if b) / len(pts))
-        for k in out:
-            out[k].append(float(np.nanmean(acc[k])) if acc[k] else float("nan"))
-    return out
+    per_drive = [
+        cd_halves([(k, pts, closed) for k, pts, closed, _ in items],
+                  [(int(m.cls), m.points, m.closed) for m in gt])
+        for items, gt in zip(maps, ggts, strict=True)
+    ]  # fmt: skip
+    names = ["ped_crossing", "divider", "boundary"]
+    return {
+        k: [float(np.nanmean([d[c][k] for d in per_drive])) for c in names]
+        for k in ("to", "from", "kept", "stray")
+    }
 
 
 if __name__ == "__main__":

@@ -82,3 +82,27 @@ def test_gap_pairs_distances_equal_globalmapnets() -> None:
         close = (lambda x: np.vstack([x, x[:1]])) if cl else (lambda x: x)
         ref = chamfer(interp_fixed_num(close(p)), interp_fixed_num(close(g)))
         assert d == pytest.approx(ref, abs=1e-9)
+
+
+def test_cd_halves_split_precision_coverage_and_strays() -> None:
+    """A true 20 m divider; the map draws it 0.3 m off along its first 10 m only, plus a 2 m stray
+    stub 5 m away: precision counts the stub, coverage the missing half, and the halves average
+    to the CD the metric reports."""
+    from icmapper.eval.globalmap import CLASS_NAMES, cd_halves, map_cd
+
+    x = np.linspace(0.0, 20.0, 41)
+    gt = [(1, np.stack([x, np.zeros_like(x)], 1), False)]
+    half = np.stack([np.linspace(0.0, 10.0, 21), np.full(21, 0.3)], 1)
+    stub = np.array([[5.0, 5.0], [5.0, 7.0]])
+    pred = [(1, half, False), (1, stub, False)]
+    h = cd_halves(pred, gt)["divider"]
+    # the 21 samples of the half line lie 0.3 m off; the stub's 5 lie 5-7 m off
+    assert h["kept"] == pytest.approx(0.3)
+    assert h["stray"] == pytest.approx(5 / 26)
+    stub_d = np.hypot(0.0, np.linspace(5.0, 7.0, 5)).mean()
+    assert h["to"] == pytest.approx((21 * 0.3 + 5 * stub_d) / 26)
+    gx = np.linspace(0.0, 20.0, 41)  # coverage: the ground truth's samples to the map
+    far = np.hypot(np.clip(gx - 10.0, 0.0, None), 0.3)
+    assert h["from"] == pytest.approx(far.mean(), abs=1e-9)
+    assert (h["to"] + h["from"]) / 2 == pytest.approx(map_cd(pred, gt)["divider"])
+    assert all(np.isnan(v) for v in cd_halves(pred, gt)[CLASS_NAMES[0]].values())

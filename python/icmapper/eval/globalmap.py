@@ -79,6 +79,40 @@ def map_cd(
     }
 
 
+def cd_halves(
+    pred: Seq[tuple[int, NDArray, bool]],
+    gt: Seq[tuple[int, NDArray, bool]],
+    far: float = 1.0,
+    step: float = CD_STEP,
+) -> dict[str, dict[str, float]]:
+    """The two halves of each class's CD between one predicted and one GT global map (cls,
+    points (n, 2), closed), for diagnosis: ``to`` (mean distance of the map's samples to the
+    ground truth's: precision), ``from`` (the ground truth's to the map's: coverage; CD is
+    their mean), ``kept`` (``to`` over the map's instances lying within ``far`` metres of the
+    ground truth on average) and ``stray`` (the share of the map's samples in the others).
+    Sampled as the CD is, without its cap; NaN for a class empty on either side."""
+    from scipy.spatial import cKDTree
+
+    out = {}
+    for c, name in enumerate(CLASS_NAMES):
+        nan = float("nan")
+        g = _class_cloud(gt, c, step, np.iinfo(np.int64).max)  # (m, 2)
+        p = [dense_sample(pts, closed, step) for cls, pts, closed in pred if cls == c]
+        if g.shape[0] == 0 or not p:
+            out[name] = {"to": nan, "from": nan, "kept": nan, "stray": nan}
+            continue
+        d = [cKDTree(g).query(q)[0] for q in p]  # per instance (m_i,)
+        near = [x for x in d if float(x.mean()) <= far]
+        pooled = np.concatenate(d)
+        out[name] = {
+            "to": float(pooled.mean()),
+            "from": float(cKDTree(np.concatenate(p)).query(g)[0].mean()),
+            "kept": float(np.concatenate(near).mean()) if near else nan,
+            "stray": 1.0 - sum(len(x) for x in near) / len(pooled),
+        }
+    return out
+
+
 def gap_samples(points: NDArray[np.floating], closed: bool) -> NDArray[np.float64]:
     """GlobalMapNet's sampling of a global instance for GAP: (n, 2) -> (200, 2) float64, the
     coordinates as one line (closed: the first point appended) at 200 arc positions
