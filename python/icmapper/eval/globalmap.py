@@ -101,7 +101,8 @@ def cd_halves(
         if g.shape[0] == 0 or not p:
             out[name] = {"to": nan, "from": nan, "kept": nan, "stray": nan}
             continue
-        d = [cKDTree(g).query(q)[0] for q in p]  # per instance (m_i,)
+        tree = cKDTree(g)
+        d = [tree.query(q)[0] for q in p]  # per instance (m_i,)
         near = [x for x in d if float(x.mean()) <= far]
         pooled = np.concatenate(d)
         out[name] = {

@@ -409,7 +409,14 @@ def changed_city_drives(
 #: before the removals): more lane lines than a city update's, so that the paint departs from
 #: the lane layout in many frames.
 REPAINT_COUNTS = (
-    ChangeCounts(0, 0, 0, divider_added=2, divider_moved=4, kerb_moved=0),
+    ChangeCounts(
+        crossing_removed=0,
+        crossing_added=0,
+        divider_removed=0,
+        divider_added=2,
+        divider_moved=4,
+        kerb_moved=0,
+    ),
     ChangeCounts(divider_removed=2, divider_added=0, divider_moved=0),
 )
 
@@ -427,16 +434,17 @@ def repainted_sequences(
     (source ``sim-repainted``). For training: the lane layout stays, the paint does not follow
     it, so a detector learns the lines from the paint."""
     from icmapper.data.sim.city import generate_city
+    from icmapper.data.sim.driver import drive
     from icmapper.data.sim.sequences import sim_city_seeds, sim_sequence
 
     out = []
     for k, city in enumerate(sim_city_seeds(split, num, seed)):
         world = generate_city(city)
-        plain = sim_sequence(city, k, (8, 8), world=world)
+        poses = drive(world, k)[1]  # (T, 4, 4) the route of sim_sequence(city, k)
         changed = world
         for p, c in enumerate(counts):
             pass_seed = (city * 4099 + k) * 7 + p
-            changed, _ = change_world(changed, plain.poses, seed=pass_seed, counts=c)
+            changed, _ = change_world(changed, poses, seed=pass_seed, counts=c)
         seq = sim_sequence(city, k, image_size, world=changed)
         seq.name = f"sim-repainted-{city}-{k}"
         out.append(seq)
