@@ -409,14 +409,7 @@ def changed_city_drives(
 #: before the removals): more lane lines than a city update's, so that the paint departs from
 #: the lane layout in many frames.
 REPAINT_COUNTS = (
-    ChangeCounts(
-        crossing_removed=0,
-        crossing_added=0,
-        divider_removed=0,
-        divider_added=2,
-        divider_moved=4,
-        kerb_moved=0,
-    ),
+    replace(ChangeCounts(*[0] * 6), divider_added=2, divider_moved=4),  # lane lines only
     ChangeCounts(divider_removed=2, divider_added=0, divider_moved=0),
 )
 
