@@ -200,7 +200,8 @@ fn arc_model(h: f64, v: &[f64; 5]) -> [f64; 6] {
 }
 
 /// Appends `[t0, t1]` of span `si` to `out` as one piece when its 5-node and 3-node quadratures
-/// agree to `tol`, else its two halves (recursively); arc length accumulated in `*s`.
+/// agree to `tol` and its arc-length model gives the quadrature's length of its first half to
+/// `tol`, else its two halves (recursively); arc length accumulated in `*s`.
 #[allow(clippy::too_many_arguments)]
 fn quad_pieces(
     sp: &Span,
@@ -219,11 +220,23 @@ fn quad_pieces(
         * (GL3_W_OUTER * (sp.speed(t0 + h * GL3_NODES[0]) + sp.speed(t0 + h * GL3_NODES[1]))
             + GL3_W_MID * v[2]);
     let err = (len - gl3).abs();
-    // (A NaN difference splits too, down to the depth limit.)
-    if depth < QUAD_MAX_DEPTH && (err > tol || err.is_nan()) {
-        let tm = 0.5 * (t0 + t1);
+    let tm = 0.5 * (t0 + t1);
+    let split = |out: &mut Vec<Piece>, s: &mut f64| {
         quad_pieces(sp, si, t0, tm, tol, depth + 1, s, out);
         quad_pieces(sp, si, tm, t1, tol, depth + 1, s, out);
+    };
+    // (A NaN difference splits too, down to the depth limit.)
+    if depth < QUAD_MAX_DEPTH && (err > tol || err.is_nan()) {
+        split(out, s);
+        return;
+    }
+    // The inversion reads the piece's arc-length model inside it, not only its total: where the
+    // speed dips sharply (near a cusp of a wiggly fit) both rules can agree on the total while
+    // the model is off inside, so the model's half-way length is checked against quadrature.
+    let arc = arc_model(h, &v);
+    let half_err = (arc.iter().rev().fold(0.0, |acc, &c| acc * 0.5 + c) - sp.length(t0, tm)).abs();
+    if depth < QUAD_MAX_DEPTH && (half_err > tol || half_err.is_nan()) {
+        split(out, s);
         return;
     }
     out.push(Piece {
@@ -232,15 +245,16 @@ fn quad_pieces(
         t1,
         s0: *s,
         len,
-        arc: arc_model(h, &v),
+        arc,
     });
     *s += len;
 }
 
 /// The parameter `tau` in `piece` at arc length `r` from its start (`0 <= r <= piece.len`): the
 /// root of the piece's arc-length model ([`arc_model`]) by Newton iteration safeguarded by
-/// bisection, to `tol` (metres of arc length). The model integrates the quartic interpolant of the speed, whose error on a piece
-/// that passed the quadrature test is far below the documented `1e-3 * spacing` (tested).
+/// bisection, to `tol` (metres of arc length). The model integrates the quartic interpolant of the
+/// speed; a piece whose model is off at its middle by more than the quadrature tolerance was split
+/// ([`quad_pieces`]), which keeps the error far below the documented `1e-3 * spacing` (tested).
 fn invert(piece: &Piece, r: f64, tol: f64) -> f64 {
     let (t0, t1) = (piece.t0, piece.t1);
     if piece.len.is_nan() || piece.len <= 0.0 {
