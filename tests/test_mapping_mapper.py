@@ -565,6 +565,62 @@ def test_fused_polylines_merge_by_rule(
         MapperConfig(splice_overlap=0.0)
 
 
+def test_clip_to_detected_keeps_the_detected_stretch() -> None:
+    """The fused polyline's stretch between the projections of the detection's ends, evenly
+    resampled; the whole fused polyline when that stretch is shorter than ``min_length``."""
+    from icmapper.mapping.splice import clip_to_detected
+
+    fused = np.stack([np.linspace(-5.0, 25.0, 31), np.zeros(31)], -1)  # 30 m along x
+    detected = np.stack([np.linspace(18.0, 2.0, 9), np.full(9, 0.4)], -1)  # reversed, beside it
+    got = clip_to_detected(fused, detected)
+    assert got.shape == fused.shape
+    np.testing.assert_allclose(got[:, 0], np.linspace(2.0, 18.0, 31))
+    np.testing.assert_allclose(got[:, 1], 0.0)
+    np.testing.assert_array_equal(clip_to_detected(fused, detected[:1].repeat(2, 0)), fused)
+
+
+def test_fused_clip_merges_only_the_detected_stretch(
+    sim_val2: list[Sequence], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """With a fusion that draws every line 6 m longer at both ends than detected, the map's lines
+    grow past the painted ones; with ``fused_clip`` only the detected stretch merges, and far
+    fewer of the map's line points lie off the ground truth."""
+    seq = sim_val2[0]
+
+    def extend(
+        det: Detections, track_ids: NDArray[np.int64], hist_row: dict[int, int], *a: object
+    ) -> tuple[NDArray[np.float32], NDArray[np.bool_]]:
+        """Fuses, as the network does, the detections whose instance has a history."""
+        out = det.points.copy()  # (m, P, 2)
+        fused = np.array([int(t) in hist_row for t in track_ids], bool)  # (m,)
+        lines = fused & (det.classes != MapClass.PED_CROSSING)
+        d = out[lines, -1] - out[lines, 0]  # (k, 2)
+        u = d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-6)
+        out[lines] += np.linspace(-6.0, 6.0, out.shape[1])[None, :, None] * u[:, None, :]
+        return out, fused
+
+    gt = global_gt(seq, RANGE_60x30)
+    off = {}
+    for clip in (False, True):
+        m = Mapper.with_oracle(seq, noise="low", seed=0, config=MapperConfig(fused_clip=clip))
+        monkeypatch.setattr(m, "_fuse", extend)
+        for i in range(12):
+            m.step(seq.frame(i, with_images=False))
+        assert m.stats.merged > 0 and m.stats.merge_failures == 0
+        far = []
+        for cls in (MapClass.DIVIDER, MapClass.BOUNDARY):
+            truth = [dense_sample(g.points, False) for g in gt if g.cls == cls]
+            tree = cKDTree(np.concatenate(truth))
+            gm = m.global_map
+            for i in gm.ids():
+                c, pts = gm.get(int(i))
+                if c == cls:
+                    far.append(tree.query(dense_sample(np.asarray(pts), False))[0] > 1.5)
+        off[clip] = float(np.concatenate(far).mean())
+    assert off[False] > 0.05
+    assert off[True] < 0.5 * off[False]
+
+
 @pytest.mark.parametrize("min_overlap, renamed", [(0.5, True), (0.6, True), (0.7, False)])
 def test_reidentify_needs_the_overlap_share(min_overlap: float, renamed: bool) -> None:
     """A new divider 60 % of whose points lie on a stored one (the rest 3 m to its side) takes its

@@ -107,6 +107,12 @@ class MapperConfig:
         "engine's curve fit, as an unfused one)",
     )
     splice_overlap: float = _f(0.5, "metres within which a spliced fused polyline replaces points")
+    fused_clip: bool = _f(
+        False,
+        "a spliced fused polyline merges only over the stretch its detection covers (the "
+        "fusion's extension beyond the detection's ends left out; mapping.splice."
+        "clip_to_detected); the tracker keeps the whole (tried, not the default: docs/mapping.md)",
+    )
     # ---- baselines
     baseline_threshold: float = _f(0.3, "score of detections the baselines use and report")
     gate: float = _f(1.5, "Post-Track / VMA: largest Chamfer distance (m) of a link")

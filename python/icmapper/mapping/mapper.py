@@ -374,6 +374,7 @@ class Mapper:
             track_ids=track_ids,
             fused=fused,
             was_fused=was_fused,
+            detected=det.points,
             pose=pose,
             frame_index=frame_index,
             on_failure=self.stats.note_failure,

@@ -28,7 +28,7 @@ from icmapper.data.types import MapClass, ego_to_world
 from icmapper.mapping.config import MapperConfig
 from icmapper.mapping.crossings import CrossingMerger
 from icmapper.mapping.passed import fresh_runs
-from icmapper.mapping.splice import splice_into
+from icmapper.mapping.splice import clip_to_detected, splice_into
 from icmapper.mapping.tracker import Tracker
 
 if TYPE_CHECKING:
@@ -50,12 +50,14 @@ def merge_frame(
     track_ids: NDArray[np.int64],
     fused: NDArray[np.float32],
     was_fused: NDArray[np.bool_],
+    detected: NDArray[np.float32],
     pose: NDArray[np.float64],
     frame_index: int,
     on_failure: FailureSink,
 ) -> tuple[list[int], list[int]]:
     """Merges the m tracked detections of one frame (classes (m,), scores (m,), track ids (m,),
-    points ``fused`` (m, P, 2) ego, ``was_fused`` (m,)) at ``pose`` (4, 4) ego->world; ``alias``
+    points ``fused`` (m, P, 2) ego, ``was_fused`` (m,), the points before fusion ``detected`` (m,
+    P, 2) ego) at ``pose`` (4, 4) ego->world; ``alias``
     maps a track id to the instance it merges into. Returns the instance ids inserted and merged
     into."""
     inserted: list[int] = []
@@ -96,6 +98,9 @@ def merge_frame(
                 merge_items.append((tid, target, world, runs))
                 continue
             # the fusion already combined it with the history (mapping.splice)
+            if config.fused_clip:  # only the stretch the detection covers
+                clipped = clip_to_detected(fused[j], detected[j])  # (P, 2) ego
+                runs = fresh_runs(clipped, ego_to_world(clipped, pose), stored, config.merge_behind)
             change = partial(
                 _splice_runs, global_map, target, runs, config.splice_overlap, frame_index
             )

@@ -24,6 +24,7 @@ if TYPE_CHECKING:
 
 __all__ = [
     "FUSED_MERGES",
+    "clip_to_detected",
     "inside_ring",
     "overlap_fraction",
     "ring_distance",
@@ -78,3 +79,21 @@ def splice_into(
     overlap)`` (world (n, 2) metres), in the engine (``GlobalMap.splice``). ValueError for
     degenerate geometry (the instance is unchanged)."""
     global_map.splice(int(target), world, overlap, frame)
+
+
+def clip_to_detected(
+    fused: NDArray[np.floating], detected: NDArray[np.floating], min_length: float = 1.0
+) -> NDArray[np.float64]:
+    """The stretch of a fused polyline (n, 2) between the projections of its detection's (k, 2)
+    two ends, as n points evenly spaced along it (``MapperConfig.fused_clip``): the fusion's
+    extension beyond what was detected left out. The whole fused polyline when that stretch is
+    shorter than ``min_length`` metres."""
+    f = np.asarray(fused, dtype=np.float64)
+    d = np.asarray(detected, dtype=np.float64)
+    _, s = project_onto_polyline(d[[0, -1]], f)  # arc lengths of the detection's ends on f
+    a, b = float(s.min()), float(s.max())
+    if b - a < min_length:
+        return f.copy()
+    cum = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(f, axis=0), axis=1))])  # (n,)
+    t = np.linspace(a, b, len(f))  # (n,)
+    return np.stack([np.interp(t, cum, f[:, 0]), np.interp(t, cum, f[:, 1])], axis=1)
