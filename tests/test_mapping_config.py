@@ -78,15 +78,17 @@ def test_from_checkpoint_takes_the_fusion_networks_history(tiny_checkpoint: Path
 def test_checkpoint_carries_mapper_settings(tiny_checkpoint: Path, tmp_path: Path) -> None:
     """The training config's [mapper] table travels in the checkpoint and is the mapper's
     starting point (configs/small.toml sets min_hits = 1, reid_alias = false, assoc_threshold =
-    0.3); --set still overrides it. ``MapperConfig.for_checkpoint`` is that starting point."""
+    0.3, fused_clip = true); --set still overrides it. ``MapperConfig.for_checkpoint`` is that
+    starting point."""
     from icmapper.cli import main
     from icmapper.models.network import checkpoint_mapper_settings
     from icmapper.training.config import config_from_dict
 
-    want_table = {"min_hits": 1, "reid_alias": False, "assoc_threshold": 0.3}
+    want_table = {"min_hits": 1, "reid_alias": False, "assoc_threshold": 0.3, "fused_clip": True}
     assert checkpoint_mapper_settings(tiny_checkpoint) == want_table
     cfg = Mapper.from_checkpoint(tiny_checkpoint).config
     assert cfg.min_hits == 1 and not cfg.reid_alias and cfg.assoc_threshold == 0.3
+    assert cfg.fused_clip and not MapperConfig().fused_clip  # the library default stays off
     assert MapperConfig.for_checkpoint(str(tiny_checkpoint)).assoc_threshold == 0.3
     assert MapperConfig().min_hits == 2  # the library default is unchanged
     with pytest.raises(ValueError, match="unknown"):
