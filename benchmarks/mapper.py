@@ -18,6 +18,8 @@ from __future__ import annotations
 
 import argparse
 import time
+from collections.abc import Iterator
+from contextlib import ExitStack, contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -46,14 +48,16 @@ def main(argv: list[str] | None = None) -> int:
     ckpt = args.checkpoint
     if ckpt is None and DEFAULT_CHECKPOINT.is_file():
         ckpt = str(DEFAULT_CHECKPOINT)
-    if ckpt is None:
-        ckpt = _fresh_checkpoint(args.config)
-        print(f"(no checkpoint: timing a freshly initialised network of {args.config})")
-    mapper = Mapper.from_checkpoint(ckpt)
-    vectoriser = _time_vectoriser(reference=args.vectoriser == "reference")
     from icmapper.models.network import checkpoint_settings
 
-    seqs = open_source(args.source, image_size=checkpoint_settings(ckpt)[1])
+    with ExitStack() as stack:  # a fresh checkpoint's temporary folder goes once read
+        if ckpt is None:
+            ckpt = stack.enter_context(fresh_checkpoint(args.config))
+            print(f"(no checkpoint: timing a freshly initialised network of {args.config})")
+        mapper = Mapper.from_checkpoint(ckpt)
+        image_size = checkpoint_settings(ckpt)[1]
+    vectoriser = _time_vectoriser(reference=args.vectoriser == "reference")
+    seqs = open_source(args.source, image_size=image_size)
     totals = dict.fromkeys(STAGES, 0.0)
     frames = 0
     render = 0.0
@@ -127,7 +131,10 @@ def _time_vectoriser(reference: bool = False) -> list[float]:
     return spent
 
 
-def _fresh_checkpoint(config: str) -> str:
+@contextmanager
+def fresh_checkpoint(config: str) -> Iterator[str]:
+    """A checkpoint of a freshly initialised network of ``config`` (its path), in a temporary
+    folder that is removed on leaving the context (a paper-scale one is about 100 MB)."""
     import tempfile
 
     from icmapper.models.checkpoint import save_checkpoint
@@ -136,8 +143,8 @@ def _fresh_checkpoint(config: str) -> str:
 
     cfg = load_config(config)
     net = ICMapperNet(cfg.model, cfg.perception_range)
-    path = Path(tempfile.mkdtemp()) / "fresh.pt"
-    save_checkpoint(
-        path, model=net.state_dict(), optimizer=None, stage=1, step=0, config=config_to_dict(cfg)
-    )
-    return str(path)
+    with tempfile.TemporaryDirectory(prefix="icmapper-fresh-") as folder:
+        path = Path(folder) / "fresh.pt"
+        weights, settings = net.state_dict(), config_to_dict(cfg)
+        save_checkpoint(path, model=weights, optimizer=None, stage=1, step=0, config=settings)
+        yield str(path)

@@ -29,7 +29,7 @@ from typing import Any
 import torch
 from icmapper.mapping.mapper import STAGES, Mapper
 
-from benchmarks.mapper import _fresh_checkpoint, _time_vectoriser, print_stages
+from benchmarks.mapper import _time_vectoriser, fresh_checkpoint, print_stages
 
 #: Logit magnitude of the ground-truth masks (sigmoid(20) = 1 - 2e-9).
 GT_LOGIT = 20.0
@@ -79,15 +79,15 @@ def main(argv: list[str] | None = None) -> int:
 
     torch.set_num_threads(args.threads)
     torch.manual_seed(args.seed)
-    ckpt = _fresh_checkpoint(args.config)
-    mapper = Mapper.from_checkpoint(ckpt, device=args.device)
+    with fresh_checkpoint(args.config) as ckpt:  # removed once read
+        mapper = Mapper.from_checkpoint(ckpt, device=args.device)
+        rng, image_size = checkpoint_settings(ckpt)
     det = mapper.source.detector  # type: ignore[attr-defined]
     if det.seg is None:
         raise SystemExit(f"{args.config} has no segmentation head (model.seg_head)")
     seg = GroundTruthSeg(det.seg)
     det.seg = seg
     vectoriser = _time_vectoriser()
-    rng, image_size = checkpoint_settings(ckpt)
     seq = open_source(args.source, image_size=image_size)[0]
     n = min(args.frames + 1, len(seq))  # frame 0 warms up (allocations, the first memory)
     mapper.reset()

@@ -158,16 +158,19 @@ def main() -> None:
         metavar="NAME=VALUE",
         help="an UpdateConfig setting (per class: a,b,c; e.g. remove_drop=inf,inf,inf)",
     )
-    ap.add_argument("--work", default=None, help="folder for the city runs (default: a temp one)")
+    ap.add_argument(
+        "--work", default=None, help="folder for the city runs, kept (default: a temporary one)"
+    )
     ap.add_argument("--json", default=None)
     args = ap.parse_args()
-    work = Path(args.work or tempfile.mkdtemp(prefix="city-update-"))
     outs = []
-    for det in args.detections:
-        update = dict(_update_setting(t) for t in args.update)
-        out = run(det, args.cities, args.seeds, args.drives, work, args.checkpoint, update)
-        print(table(out))
-        outs.append(out)
+    with tempfile.TemporaryDirectory(prefix="city-update-") as temporary:
+        work = Path(args.work or temporary)
+        for det in args.detections:
+            update = dict(_update_setting(t) for t in args.update)
+            out = run(det, args.cities, args.seeds, args.drives, work, args.checkpoint, update)
+            print(table(out))
+            outs.append(out)
     if args.json:
         Path(args.json).write_text(json.dumps(outs, indent=1, default=float))
 

@@ -5,6 +5,8 @@ with an error that says where the benchmarks are."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -148,9 +150,16 @@ def test_mapper_bench_times_either_vectoriser() -> None:
         detector.vectorise = original
 
 
-def test_pipeline_bench_runs_one_frame(capsys: pytest.CaptureFixture[str]) -> None:
-    """The paper-scale pipeline benchmark runs one frame on the CPU and prints every stage."""
+def test_pipeline_bench_runs_one_frame(
+    capsys: pytest.CaptureFixture[str], tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The paper-scale pipeline benchmark runs one frame on the CPU and prints every stage, and
+    leaves no fresh checkpoint behind (about 100 MB each; temporary files go to ``tmp_path``)."""
+    import tempfile
+
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
     assert runner.main(["pipeline", "--frames", "1"]) == 0
+    assert not list(tmp_path.iterdir())
     out = capsys.readouterr().out
     assert "rasterised ground truth" in out
     for stage in ("detector", "vectorise", "association", "tracking", "fusion", "merge"):
