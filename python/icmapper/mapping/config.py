@@ -111,7 +111,8 @@ class MapperConfig:
         False,
         "a spliced fused polyline merges only over the stretch its detection covers (the "
         "fusion's extension beyond the detection's ends left out; mapping.splice."
-        "clip_to_detected); the tracker keeps the whole (tried, not the default: docs/mapping.md)",
+        "clip_to_detected); the tracker keeps the whole (off in the library; the shipped "
+        "checkpoint's [mapper] table turns it on: docs/mapping.md, 'Clean maps')",
     )
     # ---- baselines
     baseline_threshold: float = _f(0.3, "score of detections the baselines use and report")

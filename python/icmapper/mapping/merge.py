@@ -93,14 +93,17 @@ def merge_frame(
         if target in global_map:
             # not the stretch the car has passed (mapping.passed); the tracker keeps it all
             stored = global_map.get(target)[1]
-            runs = fresh_runs(fused[j], world, stored, config.merge_behind)
             if not spliced:
+                runs = fresh_runs(fused[j], world, stored, config.merge_behind)
                 merge_items.append((tid, target, world, runs))
                 continue
-            # the fusion already combined it with the history (mapping.splice)
-            if config.fused_clip:  # only the stretch the detection covers
-                clipped = clip_to_detected(fused[j], detected[j])  # (P, 2) ego
-                runs = fresh_runs(clipped, ego_to_world(clipped, pose), stored, config.merge_behind)
+            # the fusion already combined it with the history (mapping.splice); with fused_clip
+            # only the stretch the detection covers merges
+            ego, view = fused[j], world
+            if config.fused_clip:
+                ego = clip_to_detected(fused[j], detected[j])  # (P, 2)
+                view = ego_to_world(ego, pose)
+            runs = fresh_runs(ego, view, stored, config.merge_behind)
             change = partial(
                 _splice_runs, global_map, target, runs, config.splice_overlap, frame_index
             )
