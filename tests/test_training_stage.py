@@ -325,3 +325,37 @@ def test_configs_load_and_validate(tmp_path: Path) -> None:
         bad.write_text(text)
         with pytest.raises(ValueError, match=named):
             load_config(bad)
+
+
+def test_fine_tune_on_a_finer_bev_grid_starts_from_the_coarse_weights(tmp_path: Path) -> None:
+    """``--init`` of a checkpoint with another BEV grid: the per-cell query is resampled
+    (``regrid_state``), every other weight is copied as it is, and training runs."""
+    from icmapper.models.checkpoint import regrid_state
+
+    cfg = tiny_config()
+    train(cfg, 1, tmp_path / "coarse", max_steps=1, progress=False)
+    src = load_checkpoint(tmp_path / "coarse" / "stage1.pt")["model"]
+    bx, by = cfg.model.bev_x, cfg.model.bev_y
+    # lr 1e-12: the fine-tune's one step leaves the weights where the init put them
+    fine = tiny_config(
+        model={"bev_x": 2 * bx, "bev_y": 2 * by}, stage1={"lr": 1e-12, "weight_decay": 0.0}
+    )
+    res = train(fine, 1, tmp_path / "fine", init=tmp_path / "coarse" / "stage1.pt",
+                max_steps=1, progress=False)  # fmt: skip
+    got = load_checkpoint(res["checkpoint"])["model"]
+    q = got["detector.view.query"]
+    assert q.shape == (4 * bx * by, src["detector.view.query"].shape[1])
+    # bilinear with cell centres aligned: twice as fine keeps the mean over the range, and the
+    # corner cell reads the coarse corner cell
+    fine_grid = q.reshape(2 * bx, 2 * by, -1)
+    coarse = src["detector.view.query"].reshape(bx, by, -1)
+    assert torch.allclose(fine_grid.mean((0, 1)), coarse.mean((0, 1)), atol=1e-6)
+    assert torch.allclose(fine_grid[0, 0], coarse[0, 0], atol=1e-6)
+    # every other weight as it was (batch norms' running statistics move with the step)
+    stats = ("running_mean", "running_var", "num_batches_tracked")
+    same = [k for k in src if k != "detector.view.query" and not k.endswith(stats)]
+    assert same and all(torch.allclose(got[k], src[k], atol=1e-6) for k in same)
+    # the same grid is left as it is; a table of the wrong size is refused by name
+    assert regrid_state(src, (bx, by), (bx, by)) is src
+    with pytest.raises(ValueError, match="detector.view.query"):
+        regrid_state(src, (bx + 1, by), (bx, by))

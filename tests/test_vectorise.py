@@ -446,3 +446,19 @@ def test_through_and_spur_are_checked() -> None:
         VectoriseParams(through=-1.0)
     with pytest.raises(ValueError, match="spur"):
         VectoriseParams(spur=float("nan"))
+
+
+def test_crossing_shrink_follows_the_grid() -> None:
+    """Unset, ``shrink`` is the targets' line radius on the probabilities' grid
+    (``segmentation.target_line_radius``): 0.9 m on the shipped 1.2 m cells, 0.45 m on 0.6 m
+    cells; a set value is kept."""
+    from icmapper.models.segmentation import target_line_radius
+
+    p = VectoriseParams()
+    assert p.shrink is None
+    assert p.for_grid(50, 25, 30.0, 15.0).shrink == pytest.approx(0.9)
+    assert p.for_grid(100, 50, 30.0, 15.0).shrink == pytest.approx(0.45)
+    assert target_line_radius(100, 50, 30.0, 15.0) == pytest.approx(0.45)
+    assert VectoriseParams(shrink=0.2).for_grid(100, 50, 30.0, 15.0).shrink == 0.2
+    with pytest.raises(ValueError, match="shrink"):
+        VectoriseParams(shrink=-1.0)

@@ -103,3 +103,35 @@ if __name__ == "__main__":  # pragma: no cover
         export_checkpoint(args[0], args[1])
     else:
         sys.exit("usage: python -m icmapper.models.checkpoint SRC DST [--mapper-from CONFIG.toml]")
+
+
+#: The weights laid out per BEV cell, (X * Y, C) in the cells' raster order (``models.bev``):
+#: the only tensors whose shape depends on the grid.
+GRID_TENSORS = ("detector.view.query",)
+
+
+def regrid_state(
+    state: dict[str, torch.Tensor], old: tuple[int, int], new: tuple[int, int]
+) -> dict[str, torch.Tensor]:
+    """``state`` with its per-cell tensors (``GRID_TENSORS``) resampled from a BEV grid of
+    ``old`` (X, Y) cells to ``new`` over the same range (bilinear, cell centres aligned), so
+    that a fine-tune can start a finer or coarser grid from trained weights. Other tensors are
+    shared, not copied."""
+    if tuple(old) == tuple(new):
+        return state
+    (ox, oy), (nx, ny) = old, new
+    if min(ox, oy, nx, ny) < 1:
+        raise ValueError(f"BEV grids must have >= 1 cell per side, got {old} -> {new}")
+    out = dict(state)
+    for key in GRID_TENSORS:
+        if key not in state:
+            continue
+        t = state[key]
+        if t.ndim != 2 or t.shape[0] != ox * oy:
+            raise ValueError(f"{key} has shape {tuple(t.shape)}, not ({ox} * {oy}, C)")
+        grid = t.float().t().reshape(1, t.shape[1], ox, oy)  # (1, C, X, Y)
+        fine = torch.nn.functional.interpolate(
+            grid, size=(nx, ny), mode="bilinear", align_corners=False
+        )  # (1, C, X', Y')
+        out[key] = fine.reshape(t.shape[1], nx * ny).t().contiguous().to(t.dtype)  # (X'Y', C)
+    return out

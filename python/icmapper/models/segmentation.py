@@ -59,6 +59,13 @@ def _inside(p: torch.Tensor, rings: torch.Tensor) -> torch.Tensor:
     return ((crosses & (px < x_at)).sum(-1) % 2) == 1
 
 
+def target_line_radius(bev_x: int, bev_y: int, half_x: float, half_y: float) -> float:
+    """The targets' line radius on a grid of (X, Y) cells over the range: 0.75 of the larger
+    cell side (metres). ``rasterise`` draws lines this wide; the vectoriser shrinks crossing
+    outlines by it."""
+    return 0.75 * max(2 * half_x / bev_x, 2 * half_y / bev_y)
+
+
 def rasterise(
     points: torch.Tensor,
     classes: torch.Tensor,
@@ -72,15 +79,16 @@ def rasterise(
     """Target masks of one frame.
 
     points (G, P, 2) ego metres; classes (G,) -> (K, X, Y) float32 in {0, 1}, X/Y as the BEV
-    (``bev_cell_centres``). ``line_radius`` defaults to 0.75 of the larger cell side.
+    (``bev_cell_centres``). ``line_radius`` defaults to ``target_line_radius`` of the grid.
     """
     if points.dim() != 3 or points.shape[-1] != 2 or classes.shape != points.shape[:1]:
         raise ValueError(
             f"points must be (G, P, 2) with classes (G,), got {tuple(points.shape)} and "
             f"{tuple(classes.shape)}"
         )
-    cell = max(2 * half_x / bev_x, 2 * half_y / bev_y)
-    radius = 0.75 * cell if line_radius is None else line_radius
+    if line_radius is None:
+        line_radius = target_line_radius(bev_x, bev_y, half_x, half_y)
+    radius = line_radius
     centres = bev_cell_centres(bev_x, bev_y, half_x, half_y).to(points.device).reshape(-1, 2)
     cls = classes.long()
     if bool(((cls < 0) | (cls >= num_classes)).any()):

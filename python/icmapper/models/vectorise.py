@@ -42,7 +42,7 @@ of ``python -m benchmarks vectorise``; it is not part of the runtime.
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -67,7 +67,8 @@ class VectoriseParams:
     threshold: float = 0.5  # probability above which a cell belongs to the class
     min_length: float = 2.0  # shorter line branches are dropped
     min_area: float = 2.0  # smaller crossing components (m^2) are dropped
-    shrink: float = 0.9  # crossing rectangles shrink by this (the target's line radius)
+    shrink: float | None = None  # crossing outlines shrink by this; None: the target's line
+    # radius on the probabilities' grid (``segmentation.target_line_radius``: 0.9 m on 1.2 m cells)
     rectangularity: float = 0.6  # a crossing mask filling less of its rectangle is split (0: never)
     corner_tolerance: float = 2.0  # Douglas-Peucker tolerance that finds a split mask's corners
     hull_simplify: float = 0.5  # a crossing's outline: the convex hull of its cells simplified
@@ -105,11 +106,23 @@ class VectoriseParams:
             )
         if not 0.0 <= self.through <= 90.0:
             raise ValueError(f"vectorise: through must be in [0, 90] degrees, got {self.through}")
-        for key in ("min_length", "min_area", "shrink", "simplify", "corner_tolerance", "max_hole",
+        if self.shrink is not None and not self.shrink >= 0:
+            raise ValueError(f"vectorise: shrink must be >= 0, got {self.shrink}")
+        for key in ("min_length", "min_area", "simplify", "corner_tolerance", "max_hole",
                     "hull_simplify", "ridge_curvature", "through", "spur", "edge_margin",
                     "edge_span"):  # fmt: skip
             if not getattr(self, key) >= 0:
                 raise ValueError(f"vectorise: {key} must be >= 0, got {getattr(self, key)}")
+
+    def for_grid(self, bev_x: int, bev_y: int, half_x: float, half_y: float) -> VectoriseParams:
+        """These settings with the grid-dependent ones resolved for probabilities on (X, Y)
+        cells over [-half_x, half_x] x [-half_y, half_y] (``shrink`` None: the target's line
+        radius there)."""
+        if self.shrink is not None:
+            return self
+        from icmapper.models.segmentation import target_line_radius
+
+        return replace(self, shrink=target_line_radius(bev_x, bev_y, half_x, half_y))
 
 
 @dataclass(frozen=True)
@@ -151,10 +164,10 @@ def vectorise(
     non-finite probabilities (the engine checks them)."""
     from icmapper import _icmap
 
-    p = params or VectoriseParams()
     prob = np.asarray(prob)
     if prob.ndim != 3 or min(prob.shape) < 1:
         raise ValueError(f"vectorise: prob must be (K, X, Y), got {prob.shape}")
+    p = (params or VectoriseParams()).for_grid(prob.shape[1], prob.shape[2], half_x, half_y)
     classes, scores, points = _icmap.vectorise(
         np.ascontiguousarray(prob, dtype=np.float32),  # (K, X, Y)
         float(half_x),

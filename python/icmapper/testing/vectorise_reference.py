@@ -316,10 +316,10 @@ def vectorise_reference(
     from scipy import ndimage
     from shapely.geometry import MultiPoint, Polygon
 
-    p = params or VectoriseParams()
     prob = np.asarray(prob)
     if prob.ndim != 3 or min(prob.shape) < 1:
         raise ValueError(f"vectorise: prob must be (K, X, Y), got {prob.shape}")
+    p = (params or VectoriseParams()).for_grid(prob.shape[1], prob.shape[2], half_x, half_y)
     if not np.all(np.isfinite(prob)):
         raise ValueError("vectorise: probabilities contain NaN or inf")
     if p.upsample > 1:

@@ -25,7 +25,7 @@ import torch
 from torch.nn.parallel import DistributedDataParallel
 from torch.utils.data import DataLoader, Dataset
 
-from icmapper.models.checkpoint import load_checkpoint, save_checkpoint
+from icmapper.models.checkpoint import load_checkpoint, regrid_state, save_checkpoint
 from icmapper.models.network import ICMapperNet
 from icmapper.training.bevcache import (
     ENCODER_PARTS,
@@ -297,7 +297,12 @@ def train(
             raise ValueError("stage1.freeze_encoder needs --init: the checkpoint of the encoder")
         load_encoder(net, Path(init))
     elif init is not None:  # a fine-tune: init's weights, a fresh optimizer and schedule
-        net.load_state_dict(load_checkpoint(Path(init))["model"])
+        blob = load_checkpoint(Path(init))
+        own_grid = (cfg.model.bev_x, cfg.model.bev_y)
+        src = blob.get("config", {}).get("model", {})
+        src_grid = (src.get("bev_x", own_grid[0]), src.get("bev_y", own_grid[1]))
+        # a finer or coarser BEV grid starts from the trained one (models.checkpoint.regrid_state)
+        net.load_state_dict(regrid_state(blob["model"], src_grid, own_grid))
     if stage == 1 and cfg.stage1.freeze_encoder:
         for part in ENCODER_PARTS:
             module = getattr(net.detector, part)
