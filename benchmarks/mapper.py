@@ -50,9 +50,11 @@ def main(argv: list[str] | None = None) -> int:
         ckpt = str(DEFAULT_CHECKPOINT)
     from icmapper.models.network import checkpoint_settings
 
+    label = ckpt  # what the report names: a fresh checkpoint's temporary file is gone by then
     with ExitStack() as stack:  # a fresh checkpoint's temporary folder goes once read
         if ckpt is None:
             ckpt = stack.enter_context(fresh_checkpoint(args.config))
+            label = f"fresh weights of {args.config}"
             print(f"(no checkpoint: timing a freshly initialised network of {args.config})")
         mapper = Mapper.from_checkpoint(ckpt)
         image_size = checkpoint_settings(ckpt)[1]
@@ -75,7 +77,7 @@ def main(argv: list[str] | None = None) -> int:
     wall = time.perf_counter() - wall - render
     step_total = sum(totals.values())
     print(
-        f"source {args.source}: {frames} frames, {args.threads} thread(s), checkpoint {ckpt}, "
+        f"source {args.source}: {frames} frames, {args.threads} thread(s), checkpoint {label}, "
         f"vectoriser {args.vectoriser}"
     )
     outside = print_stages(totals, vectoriser[0], frames)
