@@ -359,3 +359,41 @@ def test_fine_tune_on_a_finer_bev_grid_starts_from_the_coarse_weights(tmp_path: 
     assert regrid_state(src, (bx, by), (bx, by)) is src
     with pytest.raises(ValueError, match="detector.view.query"):
         regrid_state(src, (bx + 1, by), (bx, by))
+
+
+def test_line_radius_sets_the_targets_and_the_crossing_shrink() -> None:
+    """``model.line_radius`` (metres; 0: 0.75 of a cell) widens the segmentation targets, and the
+    detector's vectoriser shrinks crossings by it unless told otherwise."""
+    from icmapper.models.config import ModelConfig
+    from icmapper.models.vectorise import VectoriseParams
+
+    gts = [{"points": torch.tensor([[[-5.0, 0.0], [5.0, 0.0]]]), "classes": torch.tensor([1])}]
+    cells = {}
+    for radius in (0.0, 5.0):  # the tiny grid's cells are 3 m: 2.25 m by default
+        cfg = tiny_config(model={"line_radius": radius})
+        obj = Stage1Objective(ICMapperNet(cfg.model, cfg.perception_range), cfg)
+        logits = torch.zeros(1, 3, cfg.model.bev_x, cfg.model.bev_y)
+        cells[radius] = int(obj.seg_targets(gts, logits)[0, 1].sum())
+    assert cells[5.0] > cells[0.0] > 0
+    with pytest.raises(ValueError, match="line_radius"):
+        ModelConfig(line_radius=-1.0)
+    # the detector resolves an unset shrink to the configured radius (the grid's when 0)
+    seen: list[float | None] = []
+    import icmapper.models.detector as detector_mod
+
+    real = detector_mod.vectorise
+
+    def spy(prob, hx, hy, params=None):  # type: ignore[no-untyped-def]
+        seen.append(params.shrink)
+        return real(prob, hx, hy, params)
+
+    cfg = tiny_config(model={"line_radius": 2.0, "seg_head": True})
+    det = ICMapperNet(cfg.model, cfg.perception_range).detector.eval()
+    bev = torch.zeros(1, cfg.model.channels, cfg.model.bev_x, cfg.model.bev_y)
+    try:
+        detector_mod.vectorise = spy
+        det.segment_instances(bev)
+        det.segment_instances(bev, VectoriseParams(shrink=0.3))
+    finally:
+        detector_mod.vectorise = real
+    assert seen == [2.0, 0.3]

@@ -5,6 +5,7 @@ are all built from it (``icmapper.models.network.ICMapperNet``); nothing else re
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 #: The values of ``ModelConfig.instances``.
@@ -44,6 +45,9 @@ class ModelConfig:
     #: where inference takes the instances from: "decoder" (the set decoder's queries) or
     #: "segmentation" (the dense head's masks, vectorised: ``models.vectorise``; needs seg_head)
     instances: str = "decoder"
+    #: metres: the segmentation targets' line radius (and the vectoriser's crossing shrink); 0:
+    #: 0.75 of the larger BEV cell side (``segmentation.target_line_radius``)
+    line_radius: float = 0.0
 
     def __post_init__(self) -> None:
         positive = (
@@ -55,6 +59,8 @@ class ModelConfig:
                 raise ValueError(
                     f"config key model.{key} must be positive, got {getattr(self, key)}"
                 )
+        if not (math.isfinite(self.line_radius) and self.line_radius >= 0):
+            raise ValueError(f"config key model.line_radius must be >= 0, got {self.line_radius}")
         if self.channels % self.heads:
             raise ValueError(f"model.channels ({self.channels}) must be divisible by model.heads")
         if not 0 <= self.topk <= self.num_queries:

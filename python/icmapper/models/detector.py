@@ -7,7 +7,7 @@ the module between calls.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import torch
 from torch import nn
@@ -247,7 +247,10 @@ class MapDetector(nn.Module):
         if self.seg is None:
             raise ValueError("the detector has no segmentation head (model.seg_head)")
         prob = self.seg(bev)[0].float().sigmoid().cpu().numpy()  # (K, X, Y)
-        inst = vectorise(prob, self.rng.half_x, self.rng.half_y, params)
+        p = params or VectoriseParams()
+        if p.shrink is None and self.cfg.line_radius > 0:  # the targets' radius, configured
+            p = replace(p, shrink=self.cfg.line_radius)
+        inst = vectorise(prob, self.rng.half_x, self.rng.half_y, p)
         pts = torch.as_tensor(inst.points, device=bev.device)  # (N, P, 2) metres
         return inst, self.instance_embedding(bev, pts[None])[0]
 

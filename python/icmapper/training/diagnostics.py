@@ -78,7 +78,7 @@ def _masks(frames: list, cfg: ModelConfig, rng: PerceptionRange) -> torch.Tensor
     return torch.stack([
         rasterise(_points(g),
                   torch.as_tensor(np.asarray(g.classes, np.int64)), cfg.bev_x, cfg.bev_y,
-                  rng.half_x, rng.half_y, cfg.num_classes)
+                  rng.half_x, rng.half_y, cfg.num_classes, cfg.line_radius or None)
         for g in frames
     ])  # fmt: skip
 
@@ -168,7 +168,8 @@ def seg_iou(checkpoint: Path, spec: str) -> dict[str, float]:
                 pred = (det.seg(bev)[0] > 0).numpy()  # (K, X, Y)
                 g = item["gt"][t]
                 tgt = rasterise(g["points"], g["classes"], cfg.bev_x, cfg.bev_y, rng.half_x,
-                                rng.half_y, cfg.num_classes).numpy() > 0.5  # fmt: skip
+                                rng.half_y, cfg.num_classes,
+                                cfg.line_radius or None).numpy() > 0.5  # fmt: skip
                 inter += (pred & tgt).reshape(cfg.num_classes, -1).sum(1)
                 union += (pred | tgt).reshape(cfg.num_classes, -1).sum(1)
     return {n: 100 * float(inter[k] / max(union[k], 1)) for k, n in enumerate(CLASS_NAMES)}

@@ -112,9 +112,11 @@ class Stage1Objective(nn.Module):
         det = self.detector
         _, k, nx, ny = seg_logits.shape
         r = det.rng
+        radius = det.cfg.line_radius or None  # None: the grid's default
         return torch.stack(
-            [rasterise(g["points"], g["classes"], nx, ny, r.half_x, r.half_y, k) for g in gts]
-        )
+            [rasterise(g["points"], g["classes"], nx, ny, r.half_x, r.half_y, k, radius)
+             for g in gts]
+        )  # fmt: skip
 
     def association_pairs(
         self,
