@@ -36,7 +36,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         type=Path,
         default=None,
         help="stage 2: stage-1 checkpoint; stage 1: weights to fine-tune (or, with "
-        "stage1.freeze_encoder, the encoder)",
+        "stage1.freeze_encoder, the encoder); a checkpoint of another BEV grid is resampled "
+        "to this config's (models.checkpoint.regrid_state)",
     )
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument(
