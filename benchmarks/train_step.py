@@ -41,7 +41,7 @@ import torch.nn.functional as F
 from icmapper.models.bev import ViewTransformer, bev_cell_centres
 from icmapper.models.detector import MapDetector
 from icmapper.models.network import ICMapperNet
-from icmapper.models.segmentation import CROSSING, rasterise
+from icmapper.models.segmentation import CROSSING, rasterise, target_line_radius
 from icmapper.testing.clips import SyntheticClips, collate_clips
 from icmapper.training.config import load_config
 from icmapper.training.objectives import Stage1Objective
@@ -88,10 +88,13 @@ def former_rasterise(
     half_x: float,
     half_y: float,
     num_classes: int = 3,
+    line_radius: float | None = None,
 ) -> torch.Tensor:
     """The former ``models.segmentation.rasterise`` (the reference): one instance at a time, each
-    against every BEV cell. Same inputs and output (default line radius)."""
-    radius = 0.75 * max(2 * half_x / bev_x, 2 * half_y / bev_y)
+    against every BEV cell. Same inputs and output."""
+    radius = line_radius
+    if radius is None:
+        radius = target_line_radius(bev_x, bev_y, half_x, half_y)
     centres = bev_cell_centres(bev_x, bev_y, half_x, half_y).reshape(-1, 2)  # (N, 2)
     out = torch.zeros(num_classes, bev_x * bev_y)
     for line, k in zip(points.float(), classes.tolist(), strict=True):  # (P, 2), class
@@ -169,12 +172,16 @@ def main(argv: list[str] | None = None) -> int:
         use_former_step(det, former)
         bf16 = args.amp_cpu and not former
         t0 = time.perf_counter()
-        for _ in range(args.steps):
-            with torch.autocast("cpu", dtype=torch.bfloat16) if bf16 else contextlib.nullcontext():
-                loss = (obj if former else current)(batch)["loss"]
-            opt.zero_grad()
-            loss.backward()
-            opt.step()
+        try:
+            for _ in range(args.steps):
+                autocast = torch.autocast("cpu", dtype=torch.bfloat16)
+                with autocast if bf16 else contextlib.nullcontext():
+                    loss = (obj if former else current)(batch)["loss"]
+                opt.zero_grad()
+                loss.backward()
+                opt.step()
+        finally:  # the module-level switch of the objectives never outlives the run
+            use_former_step(det, False)
         return frames / (time.perf_counter() - t0)
 
     run(True), run(False)  # warm-up
@@ -187,8 +194,10 @@ def main(argv: list[str] | None = None) -> int:
         size = (int(img.shape[-2]), int(img.shape[-1]))
         cams = (batch["intrinsics"][:, 0], batch["cam_to_ego"][:, 0], size)
         use_former_step(det, True)
-        ref = det.view(det.image_features(img), *cams)  # (B, C, X, Y)
-        use_former_step(det, False)
+        try:
+            ref = det.view(det.image_features(img), *cams)  # (B, C, X, Y)
+        finally:
+            use_former_step(det, False)
         diff = float((det.view(det.image_features(img), *cams) - ref).abs().max())
         r = cfg.perception_range
         gts = [objectives.prepare_gt(g[0], det, img.device) for g in batch["gt"]]
