@@ -91,20 +91,6 @@ def export_checkpoint(
     )
 
 
-if __name__ == "__main__":  # pragma: no cover
-    import sys
-
-    args = sys.argv[1:]
-    if len(args) == 4 and args[2] == "--mapper-from":
-        from icmapper.training.config import load_config
-
-        export_checkpoint(args[0], args[1], load_config(args[3]).mapper)
-    elif len(args) == 2:
-        export_checkpoint(args[0], args[1])
-    else:
-        sys.exit("usage: python -m icmapper.models.checkpoint SRC DST [--mapper-from CONFIG.toml]")
-
-
 #: The weights laid out per BEV cell, (X * Y, C) in the cells' raster order (``models.bev``):
 #: the only tensors whose shape depends on the grid.
 GRID_TENSORS = ("detector.view.query",)
@@ -135,3 +121,17 @@ def regrid_state(
         )  # (1, C, X', Y')
         out[key] = fine.reshape(t.shape[1], nx * ny).t().contiguous().to(t.dtype)  # (X'Y', C)
     return out
+
+
+if __name__ == "__main__":  # pragma: no cover
+    import sys
+
+    args = sys.argv[1:]
+    if len(args) == 4 and args[2] == "--mapper-from":
+        from icmapper.training.config import load_config
+
+        export_checkpoint(args[0], args[1], load_config(args[3]).mapper)
+    elif len(args) == 2:
+        export_checkpoint(args[0], args[1])
+    else:
+        sys.exit("usage: python -m icmapper.models.checkpoint SRC DST [--mapper-from CONFIG.toml]")

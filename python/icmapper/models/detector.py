@@ -18,7 +18,7 @@ from icmapper.models.bev import BevNeck, TemporalMemory, ViewTransformer, sample
 from icmapper.models.config import ModelConfig
 from icmapper.models.decoder import MapDecoder
 from icmapper.models.propagation import QueryPropagation, select_topk
-from icmapper.models.segmentation import SegHead
+from icmapper.models.segmentation import SegHead, configured_line_radius
 from icmapper.models.vectorise import VectorInstances, VectoriseParams, vectorise
 
 
@@ -248,8 +248,10 @@ class MapDetector(nn.Module):
             raise ValueError("the detector has no segmentation head (model.seg_head)")
         prob = self.seg(bev)[0].float().sigmoid().cpu().numpy()  # (K, X, Y)
         p = params or VectoriseParams()
-        if p.shrink is None and self.cfg.line_radius > 0:  # the targets' radius, configured
-            p = replace(p, shrink=self.cfg.line_radius)
+        if p.shrink is None:  # crossings shrink by the targets' line radius
+            p = replace(
+                p, shrink=configured_line_radius(self.cfg, self.rng.half_x, self.rng.half_y)
+            )
         inst = vectorise(prob, self.rng.half_x, self.rng.half_y, p)
         pts = torch.as_tensor(inst.points, device=bev.device)  # (N, P, 2) metres
         return inst, self.instance_embedding(bev, pts[None])[0]

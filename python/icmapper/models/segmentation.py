@@ -17,6 +17,7 @@ import torch.nn.functional as F
 from torch import nn
 
 from icmapper.models.bev import bev_cell_centres
+from icmapper.models.config import ModelConfig
 
 #: Class index of crossings (closed contours); the other classes are open polylines.
 CROSSING = 0
@@ -66,6 +67,12 @@ def target_line_radius(bev_x: int, bev_y: int, half_x: float, half_y: float) -> 
     return 0.75 * max(2 * half_x / bev_x, 2 * half_y / bev_y)
 
 
+def configured_line_radius(cfg: ModelConfig, half_x: float, half_y: float) -> float:
+    """The targets' line radius of a model: ``cfg.line_radius``, or when 0 the grid's
+    ``target_line_radius`` (metres)."""
+    return cfg.line_radius or target_line_radius(cfg.bev_x, cfg.bev_y, half_x, half_y)
+
+
 def rasterise(
     points: torch.Tensor,
     classes: torch.Tensor,
@@ -86,9 +93,9 @@ def rasterise(
             f"points must be (G, P, 2) with classes (G,), got {tuple(points.shape)} and "
             f"{tuple(classes.shape)}"
         )
-    if line_radius is None:
-        line_radius = target_line_radius(bev_x, bev_y, half_x, half_y)
-    radius = line_radius
+    radius = (
+        target_line_radius(bev_x, bev_y, half_x, half_y) if line_radius is None else line_radius
+    )
     centres = bev_cell_centres(bev_x, bev_y, half_x, half_y).to(points.device).reshape(-1, 2)
     cls = classes.long()
     if bool(((cls < 0) | (cls >= num_classes)).any()):

@@ -35,7 +35,7 @@ from icmapper.data.types import CLASS_NAMES, NUM_INSTANCE_POINTS, PerceptionRang
 from icmapper.models.config import ModelConfig
 from icmapper.models.decoder import MapDecoder
 from icmapper.models.losses import DetectionCriterion, repeat_targets
-from icmapper.models.segmentation import rasterise
+from icmapper.models.segmentation import configured_line_radius, rasterise
 
 
 class PerfectBev(nn.Module):
@@ -78,7 +78,8 @@ def _masks(frames: list, cfg: ModelConfig, rng: PerceptionRange) -> torch.Tensor
     return torch.stack([
         rasterise(_points(g),
                   torch.as_tensor(np.asarray(g.classes, np.int64)), cfg.bev_x, cfg.bev_y,
-                  rng.half_x, rng.half_y, cfg.num_classes, cfg.line_radius or None)
+                  rng.half_x, rng.half_y, cfg.num_classes,
+                  configured_line_radius(cfg, rng.half_x, rng.half_y))
         for g in frames
     ])  # fmt: skip
 
@@ -169,7 +170,8 @@ def seg_iou(checkpoint: Path, spec: str) -> dict[str, float]:
                 g = item["gt"][t]
                 tgt = rasterise(g["points"], g["classes"], cfg.bev_x, cfg.bev_y, rng.half_x,
                                 rng.half_y, cfg.num_classes,
-                                cfg.line_radius or None).numpy() > 0.5  # fmt: skip
+                                configured_line_radius(cfg, rng.half_x, rng.half_y),
+                                ).numpy() > 0.5  # fmt: skip
                 inter += (pred & tgt).reshape(cfg.num_classes, -1).sum(1)
                 union += (pred | tgt).reshape(cfg.num_classes, -1).sum(1)
     return {n: 100 * float(inter[k] / max(union[k], 1)) for k, n in enumerate(CLASS_NAMES)}

@@ -32,7 +32,7 @@ from icmapper.models.losses import (
 )
 from icmapper.models.network import ICMapperNet
 from icmapper.models.propagation import select_topk, transform_points
-from icmapper.models.segmentation import rasterise, seg_loss
+from icmapper.models.segmentation import configured_line_radius, rasterise, seg_loss
 from icmapper.training.config import TrainConfig
 
 
@@ -112,7 +112,7 @@ class Stage1Objective(nn.Module):
         det = self.detector
         _, k, nx, ny = seg_logits.shape
         r = det.rng
-        radius = det.cfg.line_radius or None  # None: the grid's default
+        radius = configured_line_radius(det.cfg, r.half_x, r.half_y)
         return torch.stack(
             [rasterise(g["points"], g["classes"], nx, ny, r.half_x, r.half_y, k, radius)
              for g in gts]
