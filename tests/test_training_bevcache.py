@@ -1,6 +1,7 @@
 """Decoder training on cached BEVs of a frozen encoder (icmapper.training.bevcache,
-``stage1.freeze_encoder``): the cache holds what inference streams, the objective gives the same
-losses on cached BEVs as on images, the encoder stays frozen, and the cache is reused or rebuilt."""
+``stage1.freeze_encoder``, and stage 2's fusion with ``stage2.cached_bev``): the cache holds what
+inference streams, the objectives give the same losses on cached BEVs as on images, the encoder
+stays frozen, and the cache is reused or rebuilt."""
 
 from __future__ import annotations
 
@@ -20,7 +21,7 @@ from icmapper.training.bevcache import (
 )
 from icmapper.training.config import config_from_dict
 from icmapper.training.loop import train
-from icmapper.training.objectives import Stage1Objective, prev_to_cur
+from icmapper.training.objectives import Stage1Objective, Stage2Objective, prev_to_cur
 
 TINY = tiny_raw(
     model={"num_cameras": 6, "channels": 16, "point_refine": True},
@@ -194,3 +195,32 @@ def test_joined_training_sources() -> None:
         cfg = config_from_dict({"data": {"source": bad, "image_size": [16, 32]}})
         with pytest.raises(ValueError, match=match):
             training_sequences(cfg)
+
+
+def test_stage2_on_cached_bev(encoder_run: Path, tmp_path: Path) -> None:
+    """Stage 2 reads the BEVs the cache holds: on a clip from the sequence start (where a clip's
+    fresh memory and the streamed one agree) the fusion loss is the one on images, and a run
+    trains the fusion and leaves the detector as it was."""
+    cfg = _cfg()
+    net = _net(cfg, encoder_run)
+    seqs = list(open_source("sim:val:1", image_size=(32, 64)))
+    bevs = encode_sequences(net.detector, seqs, cfg.perception_range, tmp_path / "c", (32, 64))
+    objective = Stage2Objective(net, cfg).eval()
+    images = collate_clips([ClipDataset(seqs, 4, cfg.perception_range)[0]])
+    cached = collate_bev_clips([BevClipDataset(seqs, bevs, 4, cfg.perception_range)[0]])
+    with torch.no_grad():
+        a, b = objective(images), objective(cached)
+    assert float(a["fused"]) > 0 and float(b["fused"]) == float(a["fused"])
+    assert float(b["fusion"]) == pytest.approx(float(a["fusion"]), rel=2e-2, abs=1e-4)
+    with pytest.raises(ValueError, match="needs bev"):
+        objective({**cached, "bev": None})
+    stage2 = {"steps": 2, "clip_len": 4, "cached_bev": True, "lr_scale": 1.0}
+    cache = dict(TINY["data"], bev_cache_dir=str(tmp_path / "bev-cache"))
+    cfg2 = config_from_dict({**TINY, "data": cache, "stage2": stage2})
+    train(cfg2, 2, tmp_path / "s2", init=encoder_run, progress=False)
+    before = load_checkpoint(encoder_run)["model"]
+    after = load_checkpoint(tmp_path / "s2" / "stage2.pt")["model"]
+    det = [k for k in after if k.startswith("detector.")]
+    assert det and all(torch.equal(before[k], after[k]) for k in det)
+    assert any(not torch.equal(before[k], after[k]) for k in after if k.startswith("fusion."))
+    assert len(sorted((tmp_path / "bev-cache").rglob("*.pt"))) == 1

@@ -102,6 +102,11 @@ class Stage2Config:
     lambda_fusion: float = 1.0
     score_threshold: float = 0.1
     match_threshold: float = 0.1
+    #: read the frozen detector's BEVs from the BEV cache (``icmapper.training.bevcache``, the
+    #: one the association run of the same encoder fills) instead of running the encoder: each
+    #: frame's BEV as inference streams it, the memory carried from the sequence start rather
+    #: than reset at each clip; the detector takes about two thirds of a step on the CPU
+    cached_bev: bool = False
 
 
 @dataclass(frozen=True)

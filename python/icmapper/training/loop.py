@@ -151,10 +151,11 @@ def load_encoder(net: ICMapperNet, path: Path) -> None:
 
 
 def bev_dataset(
-    cfg: TrainConfig, net: ICMapperNet, out: Path, info: DistInfo | None = None
+    cfg: TrainConfig, net: ICMapperNet, out: Path, info: DistInfo | None = None, stage: int = 1
 ) -> tuple[Dataset, Any]:
-    """The cached-BEV clips of ``cfg.data.source`` (encoded now where the cache lacks them; with
-    data-parallel ranks ``info``, each rank encodes its share and then reads the others')."""
+    """The cached-BEV clips of ``cfg.data.source`` for ``stage``'s clip length (encoded now
+    where the cache lacks them; with data-parallel ranks ``info``, each rank encodes its share and
+    then reads the others')."""
     seqs = training_sequences(cfg)
     ranks = info is not None and info.enabled
     bevs = encode_sequences(
@@ -168,7 +169,8 @@ def bev_dataset(
         shard=(info.rank, info.world_size) if ranks and info is not None else (0, 1),
         wait=barrier if ranks else None,
     )
-    ds = BevClipDataset(seqs, bevs, cfg.data.clip_len, cfg.perception_range, seed=cfg.seed)
+    clip_len = cfg.data.clip_len if stage == 1 else cfg.stage2.clip_len
+    ds = BevClipDataset(seqs, bevs, clip_len, cfg.perception_range, seed=cfg.seed)
     return ds, collate_bev_clips
 
 
@@ -310,6 +312,8 @@ def train(
                 module.requires_grad_(False)
         if dataset is None:
             dataset = bev_dataset(cfg, net, out, info)
+    if stage == 2 and cfg.stage2.cached_bev and dataset is None:
+        dataset = bev_dataset(cfg, net, out, info, stage=2)  # the detector is frozen in stage 2
     kind: type[torch.nn.Module] = Stage1Objective if stage == 1 else Stage2Objective
     if stage == 1 and cfg.stage1.freeze_encoder and cfg.model.instances == "segmentation":
         kind = SegAssociationObjective  # the instances come from the frozen segmentation head

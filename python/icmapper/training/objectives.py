@@ -329,11 +329,16 @@ class Stage2Objective(nn.Module):
 
     @torch.no_grad()
     def detect(self, batch: dict) -> list[DetectorOutput]:
-        """The frozen detector over the clip: one DetectorOutput per frame."""
+        """The frozen detector over the clip: one DetectorOutput per frame (from the cached
+        BEVs where the batch has them: ``stage2.cached_bev``)."""
+        cached = batch["images"] is None
         outs, state = [], None
-        for t in range(batch["images"].shape[1]):
+        for t in range(batch["poses"].shape[1]):
             motion = prev_to_cur(batch["poses"], t) if t > 0 else None
-            out, state = self.detector(*frame_cameras(batch, t), state, motion)
+            if cached:
+                out, state = self.detector.decode(batch["bev"][:, t], state, motion)
+            else:
+                out, state = self.detector(*frame_cameras(batch, t), state, motion)
             outs.append(out)
         return outs
 
@@ -369,13 +374,13 @@ class Stage2Objective(nn.Module):
             self.map_factory = GlobalMap
         check_batch(batch)
         cfg, det = self.cfg, self.detector
-        dev = batch["images"].device
+        dev = batch["poses"].device
         r = cfg.perception_range
         scale = torch.tensor([r.half_x, r.half_y], device=dev)
         outs = self.detect(batch)
         total = sum(p.sum() * 0.0 for p in self.fusion.parameters())
         n_terms, n_fused = 0, 0
-        for b in range(batch["images"].shape[0]):
+        for b in range(batch["poses"].shape[0]):
             gmap = self.map_factory()
             crossings = CrossingMerger(self.crossing_merge, r)
             for t, out in enumerate(outs):
