@@ -128,3 +128,27 @@ def test_splice_rejects_bad_input_and_keeps_the_map() -> None:
         m.splice(2, line, 0.5, frame=1)
     with pytest.raises(KeyError):
         m.splice(99, line, 0.5, frame=1)
+
+
+def test_a_lane_line_does_not_turn_back() -> None:
+    """A stored divider whose end hooks off by 0.9 m, and a view that runs on past it (sim:val:4,
+    sim-10041-1, frame 16): the store's splice and merge of a divider end the stored line where
+    it comes back beside the view, instead of joining the hook's tip behind the view's end (a
+    line folded back on itself, drawn longer by every later view). A boundary keeps the general
+    rule (a kerb may turn around a narrow island)."""
+    hooked = np.array([[0.0, 0.0], [10.0, 0.0], [20.0, 0.0], [20.0, -0.9]])
+    view = np.array([[26.0, 0.1], [18.0, 0.1], [12.0, 0.1]])
+    for merge in ("splice", "merge"):
+        m = GlobalMap(0.5, 0.5)
+        m.insert_with_id(1, 1, hooked, frame=0)  # a divider
+        m.insert_with_id(2, 2, hooked, frame=0)  # a boundary
+        for i in (1, 2):
+            if merge == "splice":
+                m.splice(i, view, 0.5, frame=1)
+            else:
+                m.merge(i, view, frame=1)
+        line, kerb = m.get(1)[1], m.get(2)[1]
+        assert np.all(np.diff(line[:, 0]) > -1e-9), merge  # never turns back
+        assert line[-1, 0] == pytest.approx(26.0, abs=0.3) and line[0, 0] == pytest.approx(0.0)
+        # the general rule: the hook's tip joined behind the view, the kerb turns back to it
+        assert kerb[:, 0].max() > 25.0 and np.any(np.diff(kerb[:, 0]) < 0), merge

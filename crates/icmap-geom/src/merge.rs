@@ -11,6 +11,7 @@
 
 use crate::error::{GeomError, Result};
 use crate::fit::fit_curve;
+use crate::splice::Unfold;
 
 /// The smoothing fit of the spliced points; where FITPACK's system is singular for this input
 /// (a zig-zag detection can make the smoothing spline leave the data), the spliced polyline itself
@@ -264,6 +265,28 @@ pub fn merge_polyline(
     s: f64,
     spacing: f64,
 ) -> Result<Vec<Point>> {
+    merge_open(global, detected, s, spacing, false)
+}
+
+/// [`merge_polyline`] for a lane line, which does not turn back: the global points kept or refitted
+/// on either side of the detection end where the global line comes back beside it
+/// ([`crate::splice::Unfold`]).
+pub fn merge_line(
+    global: &[Point],
+    detected: &[Point],
+    s: f64,
+    spacing: f64,
+) -> Result<Vec<Point>> {
+    merge_open(global, detected, s, spacing, true)
+}
+
+fn merge_open(
+    global: &[Point],
+    detected: &[Point],
+    s: f64,
+    spacing: f64,
+    unfold: bool,
+) -> Result<Vec<Point>> {
     validate_points(global, 2, "global polyline")?;
     validate_points(detected, 2, "detected polyline")?;
     check_non_negative("s", s)?;
@@ -308,11 +331,17 @@ pub fn merge_polyline(
     // Global points by arc length: kept as they are | refitted with the detection | replaced by
     // it | refitted | kept.
     let (lo, hi) = (s_lo - margin, s_hi + margin);
+    let kept = if unfold {
+        Unfold::new(&d).trim(&g, &gcum, lo, hi)
+    } else {
+        vec![true; g.len()]
+    };
     let stored = |keep: &dyn Fn(f64) -> bool| -> Vec<Point> {
         g.iter()
             .zip(&gcum)
-            .filter(|(_, &c)| keep(c))
-            .map(|(p, _)| *p)
+            .zip(&kept)
+            .filter(|((_, &c), &k)| k && keep(c))
+            .map(|((p, _), _)| *p)
             .collect()
     };
     let mut window = stored(&|c| c < lo && c >= lo - FIT_CONTEXT);
@@ -551,6 +580,25 @@ mod tests {
                 && (out[out.len() - 1] - p(20.0 * 1.5f64.cos(), 20.0 * 1.5f64.sin())).norm() < 0.3
         );
         assert!(out.iter().all(|q| (q.coords.norm() - 20.0).abs() < 0.2));
+    }
+
+    #[test]
+    fn a_merged_line_does_not_turn_back() {
+        let pts = |v: &[[f64; 2]]| -> Vec<Point> { v.iter().map(|q| p(q[0], q[1])).collect() };
+        // the global line ends in a hook; the detection runs on past it
+        let g = pts(&[[0.0, 0.0], [10.0, 0.0], [20.0, 0.0], [20.0, -0.9]]);
+        let d = pts(&[[12.0, 0.1], [18.0, 0.1], [26.0, 0.1]]);
+        let turns_back = |out: &[Point]| out.windows(2).any(|w| w[1].x < w[0].x - 1e-9);
+        assert!(turns_back(&merge_polyline(&g, &d, 0.5, 1.0).unwrap()));
+        let out = merge_line(&g, &d, 0.5, 1.0).unwrap();
+        assert!(!turns_back(&out), "{out:?}");
+        assert!((out[0] - p(0.0, 0.0)).norm() < 1e-9 && (out[out.len() - 1].x - 26.0).abs() < 0.2);
+        // without a hook both rules merge alike
+        let straight = pts(&[[0.0, 0.0], [20.0, 0.0]]);
+        assert_eq!(
+            merge_line(&straight, &d, 0.5, 1.0).unwrap(),
+            merge_polyline(&straight, &d, 0.5, 1.0).unwrap()
+        );
     }
 
     #[test]

@@ -10,6 +10,9 @@
 //! 2. stored points within `overlap` metres of `new` are dropped (they are covered);
 //! 3. the result is the stored points before the projection of `new`'s start onto `stored`, then
 //!    `new`, then the stored points after the projection of its end (arc lengths along `stored`).
+//!
+//! A lane line does not turn back ([`splice_line`], the store's rule for dividers): there the kept
+//! stored points on either side end where the stored line comes back beside `new` ([`Unfold`]).
 
 use crate::error::Result;
 use crate::resample::polyline_length;
@@ -69,30 +72,111 @@ pub fn orient_like(stored: &[Point], new: &[Point]) -> Vec<Point> {
     }
 }
 
+/// Metres: a stored point of a line this near the interior of a new observation (its nearest
+/// point on the observation is neither end) lies on the stretch the observation replaced.
+/// Neighbouring lane lines lie further apart.
+pub const BESIDE: f64 = 1.5;
+
+/// Where a stored line turns back along a new observation `q` (oriented like it). A stored line
+/// whose end hooks off (a skeleton's end bending toward a neighbour) and a view that runs on past
+/// that end: the view's end projects onto the hook, so the hook's tip counts as lying after the
+/// view and, kept, it was joined behind the view's end, a line that turns back on itself; each
+/// later view that reached past it drew the fold longer (validation drives, sim:val:4: 19 of
+/// IC-Mapper's 47 map dividers turned back somewhere, 448 m of them lying on themselves;
+/// docs/mapping.md). A stored point comes back when it lies within [`BESIDE`] of the
+/// observation's interior ([`Unfold::beside`]). Only an observation that
+/// runs along the line is a reason to cut it ([`Unfold::along`]); a view across it (a stub) cuts
+/// nothing.
+pub struct Unfold {
+    q: Vec<Point>,
+    len: f64,
+}
+
+impl Unfold {
+    /// The rule for the new observation `q` (open, at least 2 points, oriented like the stored
+    /// line).
+    pub fn new(q: &[Point]) -> Self {
+        Unfold {
+            q: q.to_vec(),
+            len: polyline_length(q, false),
+        }
+    }
+
+    /// Whether an observation whose ends project `span` metres apart along the stored line runs
+    /// along it: at least half its length.
+    pub fn along(&self, span: f64) -> bool {
+        span >= 0.5 * self.len
+    }
+
+    /// Whether `p` lies within [`BESIDE`] of the observation's interior: its nearest point on the
+    /// observation more than [`BESIDE`] from either end (a point just past an end, where the two
+    /// lines part, is not beside it).
+    pub fn beside(&self, p: &Point) -> bool {
+        let (d, t) = project_onto_polyline(p, &self.q);
+        d <= BESIDE && t > BESIDE && t < self.len - BESIDE
+    }
+
+    /// Of the stored line `points` (arc lengths `arc` along it), which are kept when it ends
+    /// where it first comes back beside the observation: after `s_end`, every point from the
+    /// first one beside it on is dropped; before `s_start`, every point up to the last one. All
+    /// are kept when the observation does not run along the line.
+    pub fn trim(&self, points: &[Point], arc: &[f64], s_start: f64, s_end: f64) -> Vec<bool> {
+        let n = points.len();
+        if !self.along(s_end - s_start) {
+            return vec![true; n];
+        }
+        let beside: Vec<bool> = points.iter().map(|p| self.beside(p)).collect();
+        let first_after = (0..n).find(|&i| arc[i] > s_end && beside[i]);
+        let last_before = (0..n).rev().find(|&i| arc[i] <= s_start && beside[i]);
+        (0..n)
+            .map(|i| !(first_after.is_some_and(|f| i >= f) || last_before.is_some_and(|l| i <= l)))
+            .collect()
+    }
+}
+
 /// Splices `new` into `stored` (both open polylines of at least 2 points): see the module
 /// documentation. `overlap` is in metres (finite, >= 0). Errors on too few points, non-finite or
 /// out-of-domain coordinates and a bad `overlap`.
 pub fn splice_polyline(stored: &[Point], new: &[Point], overlap: f64) -> Result<Vec<Point>> {
+    splice(stored, new, overlap, false)
+}
+
+/// [`splice_polyline`] for a lane line, which does not turn back: the stored line is cut where it
+/// comes back beside `new` ([`Unfold`]).
+pub fn splice_line(stored: &[Point], new: &[Point], overlap: f64) -> Result<Vec<Point>> {
+    splice(stored, new, overlap, true)
+}
+
+fn splice(stored: &[Point], new: &[Point], overlap: f64, unfold: bool) -> Result<Vec<Point>> {
     validate_points(stored, 2, "stored polyline")?;
     validate_points(new, 2, "new polyline")?;
     check_non_negative("overlap", overlap)?;
     let q = orient_like(stored, new);
     let (_, s_start) = project_onto_polyline(&q[0], stored);
     let (_, s_end) = project_onto_polyline(&q[q.len() - 1], stored);
-    let mut before = Vec::new();
-    let mut after = Vec::new();
+    let mut arc = Vec::with_capacity(stored.len());
     let mut s_p = 0.0;
     for (i, p) in stored.iter().enumerate() {
         if i > 0 {
-            s_p += (stored[i] - stored[i - 1]).norm();
+            s_p += (*p - stored[i - 1]).norm();
         }
-        if project_onto_polyline(p, &q).0 <= overlap {
-            continue; // covered by the new observation
+        arc.push(s_p);
+    }
+    let kept = if unfold {
+        Unfold::new(&q).trim(stored, &arc, s_start, s_end)
+    } else {
+        vec![true; stored.len()]
+    };
+    let mut before = Vec::new();
+    let mut after = Vec::new();
+    for (i, p) in stored.iter().enumerate() {
+        if !kept[i] || project_onto_polyline(p, &q).0 <= overlap {
+            continue; // covered by the new observation, or where the line turned back
         }
-        if s_p <= s_start {
+        if arc[i] <= s_start {
             before.push(*p);
         }
-        if s_p > s_end {
+        if arc[i] > s_end {
             after.push(*p);
         }
     }
@@ -164,6 +248,50 @@ mod tests {
         // stored points within the overlap of an extension are replaced by it
         let out = splice_polyline(&stored, &ext, 0.6).unwrap();
         assert_eq!(out.len(), 12);
+    }
+
+    #[test]
+    fn a_line_does_not_turn_back() {
+        // the stored line ends in a 0.9 m hook; the new view runs on past it
+        let stored = pts(&[(0.0, 0.0), (10.0, 0.0), (20.0, 0.0), (20.0, -0.9)]);
+        let new = pts(&[(26.0, 0.1), (18.0, 0.1), (12.0, 0.1)]);
+        let hooked = splice_polyline(&stored, &new, 0.5).unwrap();
+        assert_eq!(hooked[hooked.len() - 1], Point::new(20.0, -0.9)); // joined behind the view
+        let out = splice_line(&stored, &new, 0.5).unwrap();
+        assert_eq!(
+            out,
+            pts(&[
+                (0.0, 0.0),
+                (10.0, 0.0),
+                (12.0, 0.1),
+                (18.0, 0.1),
+                (26.0, 0.1)
+            ])
+        );
+        // a line that already turned back: everything from where it comes back beside is dropped
+        let folded = pts(&[
+            (0.0, 0.0),
+            (20.0, 0.0),
+            (20.5, 0.5),
+            (14.0, 0.8),
+            (4.0, 0.8),
+        ]);
+        let out = splice_line(&folded, &pts(&[(12.0, 0.0), (24.0, 0.0)]), 0.3).unwrap();
+        assert_eq!(out, pts(&[(0.0, 0.0), (12.0, 0.0), (24.0, 0.0)]));
+        // at the start too; a stretch further than BESIDE from the view is kept
+        let rev: Vec<Point> = folded.iter().rev().copied().collect();
+        let out = splice_line(&rev, &pts(&[(24.0, 0.0), (12.0, 0.0)]), 0.3).unwrap();
+        assert_eq!(out, pts(&[(24.0, 0.0), (12.0, 0.0), (0.0, 0.0)]));
+        // a view across the line (a stub) cuts nothing
+        let line = pts(&[(0.0, 0.0), (10.0, 0.0), (20.0, 0.0)]);
+        let stub = pts(&[(19.0, -3.0), (19.0, 3.0)]);
+        assert_eq!(
+            splice_line(&line, &stub, 0.5).unwrap(),
+            splice_polyline(&line, &stub, 0.5).unwrap()
+        );
+        let u_turn = pts(&[(0.0, 0.0), (20.0, 0.0), (20.0, -3.0), (8.0, -3.0)]);
+        let out = splice_line(&u_turn, &pts(&[(4.0, 0.1), (16.0, 0.1)]), 0.5).unwrap();
+        assert_eq!(out[out.len() - 1], Point::new(8.0, -3.0));
     }
 
     #[test]

@@ -3,7 +3,7 @@
 
 use super::{GlobalMap, Instance, MapConfig, DEDUP_EPS};
 use crate::error::{GeomError, Result};
-use crate::merge::{merge_polygon, merge_polyline};
+use crate::merge::{merge_line, merge_polygon, merge_polyline};
 use crate::resample::{dedup_cow, resample_spacing};
 use crate::types::points_aabb;
 use crate::types::{validate_points, MapClass, Point};
@@ -43,13 +43,15 @@ pub fn wake_merge_workers() {
 
 /// The class rule of a merge: the detection `points` (world frame) merged into the current
 /// geometry `current` of an instance (polygon union for a closed crossing ring, curve-fit merge for
-/// a polyline), checked to keep the store's invariants.
+/// a polyline; for a lane divider one that does not turn back, [`merge_line`]), checked to keep
+/// the store's invariants.
 fn merge_rule(
-    closed: bool,
+    class: MapClass,
     current: &[Point],
     points: &[Point],
     config: &MapConfig,
 ) -> Result<Vec<Point>> {
+    let closed = class.is_closed();
     let merged = if closed {
         let what = "detected crossing ring";
         validate_points(points, 2, what)?;
@@ -58,7 +60,12 @@ fn merge_rule(
         merge_polygon(current, &ring, config.spacing)?
     } else {
         validate_points(points, 2, "detected polyline")?;
-        merge_polyline(current, points, config.smoothing, config.spacing)?
+        let rule = if class == MapClass::Divider {
+            merge_line
+        } else {
+            merge_polyline
+        };
+        rule(current, points, config.smoothing, config.spacing)?
     };
     validate_points(&merged, if closed { 3 } else { 2 }, "merged geometry")?;
     Ok(merged)
@@ -126,7 +133,7 @@ impl GlobalMap {
         let inst = self.slots[slot as usize]
             .as_ref()
             .ok_or(GeomError::UnknownId(id))?;
-        let merged = merge_rule(inst.closed, &inst.points, points, &self.config)?;
+        let merged = merge_rule(inst.class, &inst.points, points, &self.config)?;
         self.commit(slot, id, merged, 1, frame)
     }
 
@@ -172,7 +179,7 @@ impl GlobalMap {
             let mut errs = Vec::new();
             for &i in members {
                 let base = current.as_deref().unwrap_or(&inst.points);
-                match merge_rule(inst.closed, base, items[i].1, config) {
+                match merge_rule(inst.class, base, items[i].1, config) {
                     Ok(next) => {
                         current = Some(next);
                         merged += 1;
@@ -247,7 +254,8 @@ impl GlobalMap {
     }
 
     /// Splices the open polyline `points` into instance `id` ([`crate::splice::splice_polyline`]
-    /// with `overlap` metres: the stretch it covers is replaced, the rest kept on either side),
+    /// with `overlap` metres: the stretch it covers is replaced, the rest kept on either side; a
+    /// lane divider by [`crate::splice::splice_line`], which does not turn back),
     /// then resamples at `spacing` as [`Self::replace`] does, as a new observation at `frame`.
     /// Errors on an unknown id, a crossing (closed) instance, bad geometry or a bad `overlap`; the
     /// instance is then unchanged.
@@ -262,7 +270,12 @@ impl GlobalMap {
                 reason: format!("instance {id} is a crossing; splicing applies to polylines"),
             });
         }
-        let spliced = crate::splice::splice_polyline(&inst.points, points, overlap)?;
+        let rule = if inst.class == MapClass::Divider {
+            crate::splice::splice_line
+        } else {
+            crate::splice::splice_polyline
+        };
+        let spliced = rule(&inst.points, points, overlap)?;
         let stored = self.prepare(inst.class, &spliced)?;
         self.commit(slot, id, stored, 1, frame)
     }
