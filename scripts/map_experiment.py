@@ -238,9 +238,9 @@ def main(argv: list[str] | None = None) -> int:
     out = {}
     print(
         "| method | mAP | IDS | CD_ped | CD_div | CD_bound | mCD | mGAP | n ped/div/bound (GT) "
-        "| pieces | dup % | stray % |"
+        "| pieces | dup % | stray % | folded % |"
     )
-    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     for n in names:
         r = evaluate(preds[n], gts, maps[n], ggts, rng.name)
         out[n] = r
@@ -251,12 +251,13 @@ def main(argv: list[str] | None = None) -> int:
         pcs = "/".join(f"{fr['pieces'][c]:.2f}" for c in cn)
         dup = "/".join(f"{100 * fr['duplicates'][c]:.0f}" for c in cn)
         stray = "/".join(f"{100 * fr['stray'][c]:.0f}" for c in cn)
+        folded = "/".join(f"{100 * fr['folded'][c]:.0f}" for c in cn[1:])
         ids = r["tracking"]["mean"]["IDS"]
         print(
             f"| {n} | {100 * r['detection']['mAP']:.1f} | {ids:.2f} | "
             + " | ".join(f"{mp['CD'][c]:.3f}" for c in cn)
             + f" | {mp['mCD']:.3f} | {100 * mp['mGAP']:.1f} | {cnt} ({gtc}) | {pcs} | {dup} "
-            f"| {stray} |"
+            f"| {stray} | {folded} |"
         )
     if a.directions:
         print(

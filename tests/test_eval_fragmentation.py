@@ -69,6 +69,22 @@ def test_pieces_duplicates_and_strays_are_counted() -> None:
     assert fr["count"]["ped_crossing"]["ratio"] == 2.0
 
 
+def test_a_line_that_turns_back_is_folded() -> None:
+    # a divider drawn 0-60 m and back to 40 m 0.5 m beside itself (20 m on itself); the other
+    # drawn straight with a 3 m hook at its end (turning within 4 m of arc: not a fold); the kerb
+    # a U-turn around a 3 m wide island (its legs further apart than the gate)
+    there_and_back = np.concatenate([line(0, 60, 0, 121), line(60, 40, 0.5, 41)[1:]])
+    hook = np.concatenate([line(0, 60, 3.5, 121), [[60.0, 2.5], [59.5, 1.0]]])
+    u_turn = np.concatenate([line(0, 30, -5, 61), line(30, 0, -8, 61)])
+    pred = [(1, there_and_back, False), (1, hook, False), (2, u_turn, False), GT[3]]
+    fr = fragmentation([pred], [GT])
+    assert fr["folded"]["divider"] == 0.5
+    assert fr["folded"]["boundary"] == 0.0
+    assert math.isnan(fr["folded"]["ped_crossing"])  # crossings are rings: not measured
+    # the folded line is one piece, no duplicate, not stray: only "folded" sees it
+    assert fr["pieces"]["divider"] == 1.0 and fr["duplicates"]["divider"] == 0.0
+
+
 def test_two_equal_copies_count_one_duplicate_and_sequences_pool() -> None:
     kerb = [(2, line(0, 60, -5), False)]
     fr = fragmentation([kerb + kerb, kerb], [kerb, kerb])

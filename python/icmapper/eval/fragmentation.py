@@ -17,7 +17,11 @@ over the sequences' global maps (world frame, ``(cls, points (n, 2), closed)``):
   inside it for crossings; of two instances that lie on each other, the shorter one, or the later
   one at equal length, is the duplicate);
 - ``stray``: the share of map instances of which at most half lies within ``gate`` of the ground
-  truth of its class (stubs across lanes, phantom kerbs).
+  truth of its class (stubs across lanes, phantom kerbs);
+- ``folded``: the share of line instances (not crossings) that turn back and lie on themselves
+  over more than ``min_cover`` metres: samples within ``gate`` of another sample of the same
+  instance at least ``FOLD_GAP`` metres further along it (a line drawn forth and back looks
+  like one clean line to every other measure here). NaN for crossings.
 
 Pure numpy + scipy (k-d trees); no I/O.
 """
@@ -43,6 +47,9 @@ GATE = 1.0
 MIN_COVER = 2.0
 #: Share of an instance's samples that must lie on another one for it to be a duplicate.
 DUPLICATE_SHARE = 0.5
+#: Arc length (metres) between two samples of one line beyond which lying within the gate of each
+#: other means the line turned back (more than twice the gate: a curve cannot).
+FOLD_GAP = 4.0
 
 Item = tuple[int, NDArray[np.floating], bool]
 
@@ -115,7 +122,17 @@ def _sequence_class(
         for g in gt:
             on |= g.near(a.samples, gate)
         stray.append(bool(on.mean() <= 0.5))
-    return {"pieces": pieces, "duplicate": duplicate, "stray": stray}
+    folded = [_folded_length(a, gate) > min_cover for a in pred if not a.closed]
+    return {"pieces": pieces, "duplicate": duplicate, "stray": stray, "folded": folded}
+
+
+def _folded_length(a: _Shape, gate: float) -> float:
+    """Metres of the open instance ``a`` lying within ``gate`` of a stretch of itself at least
+    ``FOLD_GAP`` metres away along it (samples every ``STEP`` metres by arc length)."""
+    near = a.tree.query_ball_point(a.samples, gate)  # per sample, its neighbours' indices
+    gap = FOLD_GAP / STEP
+    back = [any(abs(j - i) > gap for j in nb) for i, nb in enumerate(near)]
+    return float(np.sum(back)) * STEP
 
 
 def fragmentation(
@@ -129,7 +146,8 @@ def fragmentation(
 
     Returns {"count": {class: {"map", "gt", "ratio"}}, "pieces": {class: mean}, "split": {class:
     share}, "missed": {class: share}, "duplicates": {class: share}, "stray": {class: share},
-    "gate", "min_cover"}; a ratio or mean with nothing to average is NaN.
+    "folded": {class: share}, "gate", "min_cover"}; a ratio or mean with nothing to average is
+    NaN.
     """
     if len(pred) != len(gt):
         raise ValueError(f"fragmentation: {len(pred)} predicted maps for {len(gt)} sequences")
@@ -137,12 +155,14 @@ def fragmentation(
         raise ValueError(
             f"fragmentation: need gate > 0 and min_cover >= 0, got {gate}, {min_cover}"
         )
-    out: dict = {k: {} for k in ("count", "pieces", "split", "missed", "duplicates", "stray")}
+    keys = ("count", "pieces", "split", "missed", "duplicates", "stray", "folded")
+    out: dict = {k: {} for k in keys}
     for c, name in enumerate(CLASS_NAMES):
         n_pred = n_gt = 0
         pieces: list[int] = []
         dup: list[bool] = []
         stray: list[bool] = []
+        folded: list[bool] = []
         for ps, gs in zip(pred, gt, strict=True):
             mine = _class_items([p[:3] for p in ps], c)
             truth = _class_items([g[:3] for g in gs], c)
@@ -151,6 +171,7 @@ def fragmentation(
             pieces += raw["pieces"]
             dup += raw["duplicate"]
             stray += raw["stray"]
+            folded += raw["folded"]
         covered = [p for p in pieces if p > 0]
         out["count"][name] = {
             "map": n_pred, "gt": n_gt, "ratio": n_pred / n_gt if n_gt else float("nan"),
@@ -160,5 +181,6 @@ def fragmentation(
         out["missed"][name] = float(np.mean([p == 0 for p in pieces])) if pieces else float("nan")
         out["duplicates"][name] = float(np.mean(dup)) if dup else float("nan")
         out["stray"][name] = float(np.mean(stray)) if stray else float("nan")
+        out["folded"][name] = float(np.mean(folded)) if folded else float("nan")
     out["gate"], out["min_cover"] = float(gate), float(min_cover)
     return out
