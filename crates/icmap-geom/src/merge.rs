@@ -331,17 +331,13 @@ fn merge_open(
     // Global points by arc length: kept as they are | refitted with the detection | replaced by
     // it | refitted | kept.
     let (lo, hi) = (s_lo - margin, s_hi + margin);
-    let kept = if unfold {
-        Unfold::new(&d).trim(&g, &gcum, lo, hi)
-    } else {
-        vec![true; g.len()]
-    };
+    let kept = unfold.then(|| Unfold::new(&d).trim(&g, &gcum, lo, hi));
     let stored = |keep: &dyn Fn(f64) -> bool| -> Vec<Point> {
         g.iter()
             .zip(&gcum)
-            .zip(&kept)
-            .filter(|((_, &c), &k)| k && keep(c))
-            .map(|((p, _), _)| *p)
+            .enumerate()
+            .filter(|&(i, (_, &c))| kept.as_ref().is_none_or(|k| k[i]) && keep(c))
+            .map(|(_, (p, _))| *p)
             .collect()
     };
     let mut window = stored(&|c| c < lo && c >= lo - FIT_CONTEXT);

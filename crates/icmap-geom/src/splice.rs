@@ -73,31 +73,30 @@ pub fn orient_like(stored: &[Point], new: &[Point]) -> Vec<Point> {
 }
 
 /// Metres: a stored point of a line this near the interior of a new observation (its nearest
-/// point on the observation is neither end) lies on the stretch the observation replaced.
-/// Neighbouring lane lines lie further apart.
+/// point on the observation more than this from either end) lies on the stretch the observation
+/// replaced. Neighbouring lane lines lie further apart.
 pub const BESIDE: f64 = 1.5;
 
 /// Where a stored line turns back along a new observation `q` (oriented like it). A stored line
 /// whose end hooks off (a skeleton's end bending toward a neighbour) and a view that runs on past
 /// that end: the view's end projects onto the hook, so the hook's tip counts as lying after the
 /// view and, kept, it was joined behind the view's end, a line that turns back on itself; each
-/// later view that reached past it drew the fold longer (validation drives, sim:val:4: 19 of
-/// IC-Mapper's 47 map dividers turned back somewhere, 448 m of them lying on themselves;
-/// docs/mapping.md). A stored point comes back when it lies within [`BESIDE`] of the
+/// later view that reached past it drew the fold longer (validation drives: 17 % of IC-Mapper's
+/// map dividers lay on themselves, `eval.fragmentation`'s `folded`; docs/mapping.md). A stored point comes back when it lies within [`BESIDE`] of the
 /// observation's interior ([`Unfold::beside`]). Only an observation that
 /// runs along the line is a reason to cut it ([`Unfold::along`]); a view across it (a stub) cuts
 /// nothing.
-pub struct Unfold {
-    q: Vec<Point>,
+pub struct Unfold<'a> {
+    q: &'a [Point],
     len: f64,
 }
 
-impl Unfold {
+impl<'a> Unfold<'a> {
     /// The rule for the new observation `q` (open, at least 2 points, oriented like the stored
     /// line).
-    pub fn new(q: &[Point]) -> Self {
+    pub fn new(q: &'a [Point]) -> Self {
         Unfold {
-            q: q.to_vec(),
+            q,
             len: polyline_length(q, false),
         }
     }
@@ -112,7 +111,7 @@ impl Unfold {
     /// observation more than [`BESIDE`] from either end (a point just past an end, where the two
     /// lines part, is not beside it).
     pub fn beside(&self, p: &Point) -> bool {
-        let (d, t) = project_onto_polyline(p, &self.q);
+        let (d, t) = project_onto_polyline(p, self.q);
         d <= BESIDE && t > BESIDE && t < self.len - BESIDE
     }
 
@@ -162,15 +161,11 @@ fn splice(stored: &[Point], new: &[Point], overlap: f64, unfold: bool) -> Result
         }
         arc.push(s_p);
     }
-    let kept = if unfold {
-        Unfold::new(&q).trim(stored, &arc, s_start, s_end)
-    } else {
-        vec![true; stored.len()]
-    };
+    let kept = unfold.then(|| Unfold::new(&q).trim(stored, &arc, s_start, s_end));
     let mut before = Vec::new();
     let mut after = Vec::new();
     for (i, p) in stored.iter().enumerate() {
-        if !kept[i] || project_onto_polyline(p, &q).0 <= overlap {
+        if kept.as_ref().is_some_and(|k| !k[i]) || project_onto_polyline(p, &q).0 <= overlap {
             continue; // covered by the new observation, or where the line turned back
         }
         if arc[i] <= s_start {

@@ -57,6 +57,13 @@ impl MapClass {
         matches!(self, MapClass::PedCrossing)
     }
 
+    /// Whether instances of this class never turn back on themselves (lane dividers; a kerb may
+    /// turn around a narrow island): the store merges and splices them by the rules that cut a
+    /// stored line where it comes back beside a new view ([`crate::splice::Unfold`]).
+    pub fn never_turns_back(self) -> bool {
+        matches!(self, MapClass::Divider)
+    }
+
     /// The class index (0, 1, 2).
     pub fn index(self) -> u8 {
         self as u8

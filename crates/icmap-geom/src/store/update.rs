@@ -60,7 +60,7 @@ fn merge_rule(
         merge_polygon(current, &ring, config.spacing)?
     } else {
         validate_points(points, 2, "detected polyline")?;
-        let rule = if class == MapClass::Divider {
+        let rule = if class.never_turns_back() {
             merge_line
         } else {
             merge_polyline
@@ -270,7 +270,7 @@ impl GlobalMap {
                 reason: format!("instance {id} is a crossing; splicing applies to polylines"),
             });
         }
-        let rule = if inst.class == MapClass::Divider {
+        let rule = if inst.class.never_turns_back() {
             crate::splice::splice_line
         } else {
             crate::splice::splice_polyline
