@@ -106,6 +106,12 @@ class MapperConfig:
         "replaces the stretch it covers within splice_overlap; mapping.splice) or 'fit' (the "
         "engine's curve fit, as an unfused one)",
     )
+    beside_gate: float = _f(
+        2.0,
+        "metres; a lane-line view running beside its instance (most of it farther than this, "
+        "mapping.passed.lies_beside) shows another line: its track leaves the instance and the "
+        "view goes in as a new one (0: off)",
+    )
     splice_overlap: float = _f(0.5, "metres within which a spliced fused polyline replaces points")
     fused_clip: bool = _f(
         False,
@@ -150,7 +156,8 @@ class MapperConfig:
         for name in ("min_hits", "cluster_min_samples"):
             if getattr(self, name) < 1:
                 raise ValueError(f"MapperConfig.{name} must be >= 1, got {getattr(self, name)}")
-        for name in ("max_age", "reid_distance", "fusion_margin", "smoothing", "merge_behind",
+        for name in ("max_age", "reid_distance", "beside_gate", "fusion_margin", "smoothing",
+                     "merge_behind",
                      "stub_length"):  # fmt: skip
             if not getattr(self, name) >= 0:
                 raise ValueError(f"MapperConfig.{name} must be >= 0, got {getattr(self, name)}")

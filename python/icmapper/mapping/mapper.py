@@ -363,7 +363,7 @@ class Mapper:
     ) -> tuple[list[int], list[int]]:
         """Merges the tracked detections into the map (``mapping.merge``); returns the ids
         inserted and merged into."""
-        inserted, merged = merge_frame(
+        inserted, merged, split = merge_frame(
             self._map,
             self.crossings,
             self.tracker,
@@ -381,6 +381,7 @@ class Mapper:
         )
         self.stats.inserted += len(inserted)
         self.stats.merged += len(merged)
+        self.stats.split += len(split)
         return inserted, merged
 
     def _absorb(self, touched: list[int]) -> None:

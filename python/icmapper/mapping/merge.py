@@ -6,6 +6,9 @@ into the global map by the rule for what it is.
   (``mapping.passed``), spliced in when fusion already combined it with the history
   (``mapping.splice``, ``fused_merge = "splice"``), merged by curve fit otherwise (collected and
   run in one parallel ``merge_many`` call: the same map as merging in order);
+- a lane-line view that runs beside its instance instead of on it (``beside_gate``,
+  ``mapping.passed.lies_beside``) shows another line: its track leaves the instance (an alias is
+  dropped, an instance's own track gets a fresh id) and the view goes in as a new instance;
 - a new instance: inserted once its track has been seen in ``min_hits`` frames, or at once when
   its detection scores at least ``confirm_score`` (a confident first sighting is not held back:
   an instance in range in a single keyframe would never enter the map) and, for a crossing, the
@@ -27,7 +30,7 @@ from numpy.typing import NDArray
 from icmapper.data.types import MapClass, ego_to_world
 from icmapper.mapping.config import MapperConfig
 from icmapper.mapping.crossings import CrossingMerger
-from icmapper.mapping.passed import fresh_runs
+from icmapper.mapping.passed import fresh_runs, lies_beside
 from icmapper.mapping.splice import clip_to_detected, splice_into
 from icmapper.mapping.tracker import Tracker
 
@@ -54,14 +57,16 @@ def merge_frame(
     pose: NDArray[np.float64],
     frame_index: int,
     on_failure: FailureSink,
-) -> tuple[list[int], list[int]]:
+) -> tuple[list[int], list[int], list[int]]:
     """Merges the m tracked detections of one frame (classes (m,), scores (m,), track ids (m,),
     points ``fused`` (m, P, 2) ego, ``was_fused`` (m,), the points before fusion ``detected`` (m,
     P, 2) ego) at ``pose`` (4, 4) ego->world; ``alias``
     maps a track id to the instance it merges into. Returns the instance ids inserted and merged
-    into."""
+    into, and the tracks split off their instance (``beside_gate``: their ids, already in
+    ``track_ids``, which changes in place where a track got a fresh id)."""
     inserted: list[int] = []
     merged: list[int] = []
+    split: list[int] = []
     # Inserts and crossing merges now (a later detection of this frame may merge into a new
     # instance), polyline merges collected and run in one parallel merge_many call: the same
     # map as merging in order.
@@ -81,11 +86,29 @@ def merge_frame(
         merged.append(target)
         tracker.set_points(tid, world)
 
-    for j, tid in enumerate(track_ids.tolist()):
+    for j in range(len(track_ids)):
+        tid = int(track_ids[j])
         world = ego_to_world(fused[j], pose)  # (P, 2)
         target = alias.get(tid, tid)  # the global instance this track maps into
         crossing = int(classes[j]) == MapClass.PED_CROSSING
         spliced = bool(was_fused[j]) and config.fused_merge == "splice"
+        # the view to merge: with fused_clip a spliced view only over the stretch detected
+        ego, view = fused[j], world
+        if spliced and config.fused_clip:
+            ego = clip_to_detected(fused[j], detected[j])  # (P, 2)
+            view = ego_to_world(ego, pose)
+        if (
+            target in global_map
+            and int(classes[j]) == MapClass.DIVIDER
+            and config.beside_gate > 0
+            and lies_beside(view, global_map.get(target)[1], config.beside_gate)
+        ):  # another lane line than its instance's: the track becomes a new instance
+            alias.pop(tid, None)
+            if tid in global_map:
+                tid = tracker.split(tid)
+                track_ids[j] = tid
+            target = tid
+            split.append(tid)
         if target in global_map and crossing:  # by the crossing rule (mapping.crossings)
             change = partial(crossings.merge, global_map, target, world, fused[j], frame_index)
             commit(tid, target, world, change)
@@ -99,10 +122,6 @@ def merge_frame(
                 continue
             # the fusion already combined it with the history (mapping.splice); with fused_clip
             # only the stretch the detection covers merges
-            ego, view = fused[j], world
-            if config.fused_clip:
-                ego = clip_to_detected(fused[j], detected[j])  # (P, 2)
-                view = ego_to_world(ego, pose)
             runs = fresh_runs(ego, view, stored, config.merge_behind)
             change = partial(
                 _splice_runs, global_map, target, runs, config.splice_overlap, frame_index
@@ -136,7 +155,7 @@ def merge_frame(
                 continue
             merged.append(target)
             tracker.set_points(tid, world)
-    return inserted, merged
+    return inserted, merged, split
 
 
 def _splice_runs(

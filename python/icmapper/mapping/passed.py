@@ -82,6 +82,23 @@ def fresh_runs(
     return sorted(runs, key=len, reverse=True)
 
 
+def lies_beside(
+    view: NDArray[np.floating], stored: NDArray[np.floating], gate: float, margin: float = 1.0
+) -> bool:
+    """Whether a polyline view (n, 2) runs beside its stored instance (m, 2) instead of on it:
+    more than half of the view's points that project inside the stored line (more than
+    ``margin`` metres from either end) lie farther than ``gate`` metres from it, and at least 3
+    do. The view then shows another line (a neighbouring lane's): spliced or fitted into the
+    instance, it would draw the two lines as one weaving between them. Same frame for both."""
+    s_ = np.asarray(stored, dtype=np.float64)
+    if len(s_) < 2:
+        return False
+    dist, s = project_onto_polyline(np.asarray(view, dtype=np.float64), s_)  # (n,), (n,)
+    length = float(np.linalg.norm(np.diff(s_, axis=0), axis=1).sum())
+    inner = (s > margin) & (s < length - margin)  # (n,)
+    return bool(inner.sum() >= 3 and np.mean(dist[inner] > gate) > 0.5)
+
+
 def merge_view(
     global_map: GlobalMap,
     target: int,

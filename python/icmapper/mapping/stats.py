@@ -30,6 +30,7 @@ class MapperStats:
     merged: int = 0
     reidentified: int = 0  # new tracks renamed to a global instance's id
     aliased: int = 0  # new tracks mapped into an instance already matched this frame
+    split: int = 0  # tracks whose view ran beside their instance: a new instance (beside_gate)
     absorbed: int = 0  # instances absorbed into a same-class neighbour (``mapping.absorb``)
     merge_failures: int = 0
     failures: list[str] = field(default_factory=list)

@@ -312,6 +312,14 @@ class Tracker:
         self._tracks = [t for t in self._tracks if t.id != new_id or t is tr]
         tr.id = int(new_id)
 
+    def split(self, track_id: int) -> int:
+        """Gives track `track_id` a fresh id (it follows another line than its instance's: a new
+        identity from now on) and returns it."""
+        tr = self.track(track_id)
+        tr.id = self._next_id
+        self._next_id += 1
+        return tr.id
+
     def set_points(self, track_id: int, points_world: NDArray[np.floating]) -> None:
         """Replaces a track's stored geometry (n, 2) WORLD frame, e.g. with the fused result."""
         pts = np.asarray(points_world, dtype=np.float64)
