@@ -11,9 +11,8 @@
 //! 3. the result is the stored points before the projection of `new`'s start onto `stored`, then
 //!    `new`, then the stored points after the projection of its end (arc lengths along `stored`).
 //!
-//! A line does not fold onto itself ([`splice_line`], the store's rule for lane lines and kerbs):
-//! there the kept stored points on either side end where the stored line comes back beside `new`
-//! ([`Unfold`]), within the class's fold gap ([`crate::types::MapClass::fold_gap`]).
+//! A lane line does not turn back ([`splice_line`], the store's rule for dividers): there the kept
+//! stored points on either side end where the stored line comes back beside `new` ([`Unfold`]).
 
 use crate::error::Result;
 use crate::resample::polyline_length;
@@ -73,42 +72,32 @@ pub fn orient_like(stored: &[Point], new: &[Point]) -> Vec<Point> {
     }
 }
 
-/// Metres: a stored point of a lane line this near the interior of a new observation lies on the
-/// stretch the observation replaced. Neighbouring lane lines lie further apart.
-pub const LANE_FOLD: f64 = 1.5;
-
-/// Metres: the same for a kerb. A kerb may turn around a median island (1.5-4 m wide in the
-/// synthetic cities), whose other side lies further than this; a kerb folded onto itself by the
-/// merges (validation drives: a quarter to two fifths of IC-Mapper's map kerbs) lies nearer.
-pub const KERB_FOLD: f64 = 1.0;
-
-/// Metres: a stored point beside an observation nearer than this to one of its ends is not
-/// beside its interior (there the two lines part).
-pub const END_MARGIN: f64 = 1.5;
+/// Metres: a stored point of a line this near the interior of a new observation (its nearest
+/// point on the observation more than this from either end) lies on the stretch the observation
+/// replaced. Neighbouring lane lines lie further apart.
+pub const BESIDE: f64 = 1.5;
 
 /// Where a stored line turns back along a new observation `q` (oriented like it). A stored line
 /// whose end hooks off (a skeleton's end bending toward a neighbour) and a view that runs on past
 /// that end: the view's end projects onto the hook, so the hook's tip counts as lying after the
 /// view and, kept, it was joined behind the view's end, a line that turns back on itself; each
 /// later view that reached past it drew the fold longer (validation drives: 17 % of IC-Mapper's
-/// map dividers lay on themselves, `eval.fragmentation`'s `folded`; docs/mapping.md). A stored
-/// point comes back when it lies within the fold gap of the observation's interior
-/// ([`Unfold::beside`]). Only an observation that runs along the line is a reason to cut it
-/// ([`Unfold::along`]); a view across it (a stub) cuts nothing.
+/// map dividers lay on themselves, `eval.fragmentation`'s `folded`; docs/mapping.md). A stored point comes back when it lies within [`BESIDE`] of the
+/// observation's interior ([`Unfold::beside`]). Only an observation that
+/// runs along the line is a reason to cut it ([`Unfold::along`]); a view across it (a stub) cuts
+/// nothing.
 pub struct Unfold<'a> {
     q: &'a [Point],
     len: f64,
-    gap: f64,
 }
 
 impl<'a> Unfold<'a> {
     /// The rule for the new observation `q` (open, at least 2 points, oriented like the stored
-    /// line) and the fold gap `gap` (metres; [`LANE_FOLD`], [`KERB_FOLD`]).
-    pub fn new(q: &'a [Point], gap: f64) -> Self {
+    /// line).
+    pub fn new(q: &'a [Point]) -> Self {
         Unfold {
             q,
             len: polyline_length(q, false),
-            gap,
         }
     }
 
@@ -118,12 +107,12 @@ impl<'a> Unfold<'a> {
         span >= 0.5 * self.len
     }
 
-    /// Whether `p` lies within the fold gap of the observation's interior: its nearest point on
-    /// the observation more than [`END_MARGIN`] from either end (a point just past an end, where
-    /// the two lines part, is not beside it).
+    /// Whether `p` lies within [`BESIDE`] of the observation's interior: its nearest point on the
+    /// observation more than [`BESIDE`] from either end (a point just past an end, where the two
+    /// lines part, is not beside it).
     pub fn beside(&self, p: &Point) -> bool {
         let (d, t) = project_onto_polyline(p, self.q);
-        d <= self.gap && t > END_MARGIN && t < self.len - END_MARGIN
+        d <= BESIDE && t > BESIDE && t < self.len - BESIDE
     }
 
     /// Of the stored line `points` (arc lengths `arc` along it), which are kept when it ends
@@ -148,22 +137,16 @@ impl<'a> Unfold<'a> {
 /// documentation. `overlap` is in metres (finite, >= 0). Errors on too few points, non-finite or
 /// out-of-domain coordinates and a bad `overlap`.
 pub fn splice_polyline(stored: &[Point], new: &[Point], overlap: f64) -> Result<Vec<Point>> {
-    splice(stored, new, overlap, None)
+    splice(stored, new, overlap, false)
 }
 
-/// [`splice_polyline`] for a line that does not fold onto itself: the stored line is cut where it
-/// comes back within `gap` metres beside `new` ([`Unfold`]).
-pub fn splice_line(stored: &[Point], new: &[Point], overlap: f64, gap: f64) -> Result<Vec<Point>> {
-    check_non_negative("gap", gap)?;
-    splice(stored, new, overlap, Some(gap))
+/// [`splice_polyline`] for a lane line, which does not turn back: the stored line is cut where it
+/// comes back beside `new` ([`Unfold`]).
+pub fn splice_line(stored: &[Point], new: &[Point], overlap: f64) -> Result<Vec<Point>> {
+    splice(stored, new, overlap, true)
 }
 
-fn splice(
-    stored: &[Point],
-    new: &[Point],
-    overlap: f64,
-    unfold: Option<f64>,
-) -> Result<Vec<Point>> {
+fn splice(stored: &[Point], new: &[Point], overlap: f64, unfold: bool) -> Result<Vec<Point>> {
     validate_points(stored, 2, "stored polyline")?;
     validate_points(new, 2, "new polyline")?;
     check_non_negative("overlap", overlap)?;
@@ -178,7 +161,7 @@ fn splice(
         }
         arc.push(s_p);
     }
-    let kept = unfold.map(|gap| Unfold::new(&q, gap).trim(stored, &arc, s_start, s_end));
+    let kept = unfold.then(|| Unfold::new(&q).trim(stored, &arc, s_start, s_end));
     let mut before = Vec::new();
     let mut after = Vec::new();
     for (i, p) in stored.iter().enumerate() {
@@ -269,7 +252,7 @@ mod tests {
         let new = pts(&[(26.0, 0.1), (18.0, 0.1), (12.0, 0.1)]);
         let hooked = splice_polyline(&stored, &new, 0.5).unwrap();
         assert_eq!(hooked[hooked.len() - 1], Point::new(20.0, -0.9)); // joined behind the view
-        let out = splice_line(&stored, &new, 0.5, LANE_FOLD).unwrap();
+        let out = splice_line(&stored, &new, 0.5).unwrap();
         assert_eq!(
             out,
             pts(&[
@@ -288,58 +271,22 @@ mod tests {
             (14.0, 0.8),
             (4.0, 0.8),
         ]);
-        let out = splice_line(&folded, &pts(&[(12.0, 0.0), (24.0, 0.0)]), 0.3, LANE_FOLD).unwrap();
+        let out = splice_line(&folded, &pts(&[(12.0, 0.0), (24.0, 0.0)]), 0.3).unwrap();
         assert_eq!(out, pts(&[(0.0, 0.0), (12.0, 0.0), (24.0, 0.0)]));
-        // at the start too; a stretch further than LANE_FOLD from the view is kept
+        // at the start too; a stretch further than BESIDE from the view is kept
         let rev: Vec<Point> = folded.iter().rev().copied().collect();
-        let out = splice_line(&rev, &pts(&[(24.0, 0.0), (12.0, 0.0)]), 0.3, LANE_FOLD).unwrap();
+        let out = splice_line(&rev, &pts(&[(24.0, 0.0), (12.0, 0.0)]), 0.3).unwrap();
         assert_eq!(out, pts(&[(24.0, 0.0), (12.0, 0.0), (0.0, 0.0)]));
         // a view across the line (a stub) cuts nothing
         let line = pts(&[(0.0, 0.0), (10.0, 0.0), (20.0, 0.0)]);
         let stub = pts(&[(19.0, -3.0), (19.0, 3.0)]);
         assert_eq!(
-            splice_line(&line, &stub, 0.5, LANE_FOLD).unwrap(),
+            splice_line(&line, &stub, 0.5).unwrap(),
             splice_polyline(&line, &stub, 0.5).unwrap()
         );
         let u_turn = pts(&[(0.0, 0.0), (20.0, 0.0), (20.0, -3.0), (8.0, -3.0)]);
-        let out = splice_line(&u_turn, &pts(&[(4.0, 0.1), (16.0, 0.1)]), 0.5, LANE_FOLD).unwrap();
+        let out = splice_line(&u_turn, &pts(&[(4.0, 0.1), (16.0, 0.1)]), 0.5).unwrap();
         assert_eq!(out[out.len() - 1], Point::new(8.0, -3.0));
-    }
-
-    #[test]
-    fn a_kerb_folds_within_its_own_gap_only() {
-        // a kerb around a median 1.4 m wide: its other side is kept with the kerb's gap
-        let median = pts(&[
-            (0.0, 0.0),
-            (20.0, 0.0),
-            (20.5, -0.7),
-            (20.0, -1.4),
-            (8.0, -1.4),
-        ]);
-        let view = pts(&[(4.0, 0.0), (16.0, 0.0)]);
-        let far_side = |out: &[Point], y: f64| out.contains(&Point::new(8.0, y));
-        assert!(far_side(
-            &splice_line(&median, &view, 0.5, KERB_FOLD).unwrap(),
-            -1.4
-        ));
-        // the lane lines' gap would cut it
-        assert!(!far_side(
-            &splice_line(&median, &view, 0.5, LANE_FOLD).unwrap(),
-            -1.4
-        ));
-        // a kerb the merges folded 0.8 m onto itself is cut
-        let folded = pts(&[
-            (0.0, 0.0),
-            (20.0, 0.0),
-            (20.4, -0.4),
-            (20.0, -0.8),
-            (8.0, -0.8),
-        ]);
-        assert!(!far_side(
-            &splice_line(&folded, &view, 0.5, KERB_FOLD).unwrap(),
-            -0.8
-        ));
-        assert!(splice_line(&folded, &view, 0.5, -1.0).is_err());
     }
 
     #[test]
