@@ -6,8 +6,8 @@ the mapping settings (``--set NAME=VALUE``, ``MapperConfig``) without rendering 
 Every method maps the same detections (IC-Mapper's, recorded, replayed to the baselines, as
 ``icmapper compare`` does). Prints, per method, the map error, mGAP, ID switches and the
 map's cleanliness (``eval.fragmentation``); ``--directions`` the two halves of each class's CD
-(the map's points to the ground truth, the ground truth's to the map) and the stray instances'
-part; ``--json`` writes them.
+(the map's points to the ground truth, the ground truth's to the map), the stray instances'
+part and what the mapping lost of what the detections saw; ``--json`` writes them.
 
     .venv/bin/python scripts/map_experiment.py --source sim:val:4 \
         --methods icmapper,post-track,polymerge --set map_nms=true
@@ -198,6 +198,7 @@ def main(argv: list[str] | None = None) -> int:
     preds: dict[str, list] = {n: [] for n in names}
     maps: dict[str, list] = {n: [] for n in names}
     gts, ggts = [], []
+    seen: list[list[tuple[int, np.ndarray]]] = []  # per drive: (class, points world) tracked
     t0 = time.time()
     for seq in seqs:
         cached = src.load(seq.name)
@@ -230,6 +231,7 @@ def main(argv: list[str] | None = None) -> int:
                 d = Path(a.maps) / n
                 d.mkdir(parents=True, exist_ok=True)
                 gmap.save(str(d / f"{seq.name}.icmap"))
+        seen.append(tracked_world(rec.records, seq.poses, cfg.track_threshold))
         if not cached:
             src.save(seq.name)
         gts.append(gt_mod.sequence_gt(seq, rng))
@@ -261,14 +263,16 @@ def main(argv: list[str] | None = None) -> int:
         )
     if a.directions:
         print(
-            "\n| method | to GT ped/div/bound | from GT | to GT without strays | stray points % |"
+            "\n| method | to GT ped/div/bound | from GT | to GT without strays | stray points % "
+            "| detected, not mapped % div/bound |"
         )
-        print("|---|---|---|---|---|")
+        print("|---|---|---|---|---|---|")
         for n in names:
             d = cd_directions(maps[n], ggts)
             cells = ["/".join(f"{v:.3f}" for v in d[k]) for k in ("to", "from", "kept")]
             stray = "/".join(f"{100 * v:.1f}" for v in d["stray"])
-            print(f"| {n} | " + " | ".join(cells) + f" | {stray} |")
+            lost = "/".join(f"{100 * v:.1f}" for v in detected_not_mapped(maps[n], ggts, seen))
+            print(f"| {n} | " + " | ".join(cells) + f" | {stray} | {lost} |")
     if a.json:
         Path(a.json).write_text(json.dumps(out, indent=1, default=float))
     return 0
@@ -289,6 +293,51 @@ def cd_directions(maps: list, ggts: list) -> dict[str, list[float]]:
         k: [float(np.nanmean([d[c][k] for d in per_drive])) for c in names]
         for k in ("to", "from", "kept", "stray")
     }
+
+
+def tracked_world(
+    records: dict[int, Any], poses: Any, threshold: float
+) -> list[tuple[int, np.ndarray]]:
+    """The lines of one drive's recorded detections scoring at least ``threshold`` (the ones
+    IC-Mapper tracks and maps), each as (class, points (P, 2) world)."""
+    out = []
+    for i, det in records.items():
+        pose = np.asarray(poses[i], np.float64)  # (4, 4) ego -> world
+        for j in np.flatnonzero((det.classes != 0) & (det.scores >= threshold)):
+            pts = np.asarray(det.points[j], np.float64)  # (P, 2) ego
+            out.append((int(det.classes[j]), pts @ pose[:2, :2].T + pose[:2, 3]))
+    return out
+
+
+def detected_not_mapped(
+    maps: list, ggts: list, seen: list[list[tuple[int, np.ndarray]]], gate: float = 1.0
+) -> list[float]:
+    """Per line class (divider, boundary): the share of the ground truth's samples (pooled over
+    the drives, sampled as the CD is) that a tracked detection of some frame came within
+    ``gate`` metres of and the map did not: what the mapping lost of what was seen."""
+    from icmapper.eval.globalmap import dense_sample
+    from scipy.spatial import cKDTree
+
+    def near(q: np.ndarray, lines: list[np.ndarray]) -> np.ndarray:
+        if not lines:
+            return np.zeros(len(q), bool)
+        pts = np.concatenate([dense_sample(x, False) for x in lines])
+        return cKDTree(pts).query(q)[0] <= gate
+
+    out = []
+    for c in (1, 2):
+        lost = total = 0
+        for items, gt, dets in zip(maps, ggts, seen, strict=True):
+            truth = [dense_sample(m.points, False) for m in gt if int(m.cls) == c]
+            if not truth:
+                continue
+            q = np.concatenate(truth)  # (n, 2)
+            mapped = near(q, [pts for k, pts, _, _ in items if k == c])
+            detected = near(q, [pts for k, pts in dets if k == c])
+            lost += int((detected & ~mapped).sum())
+            total += len(q)
+        out.append(lost / total if total else float("nan"))
+    return out
 
 
 if __name__ == "__main__":
