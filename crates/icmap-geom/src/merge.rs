@@ -265,19 +265,21 @@ pub fn merge_polyline(
     s: f64,
     spacing: f64,
 ) -> Result<Vec<Point>> {
-    merge_open(global, detected, s, spacing, false)
+    merge_open(global, detected, s, spacing, None)
 }
 
-/// [`merge_polyline`] for a lane line, which does not turn back: the global points kept or refitted
-/// on either side of the detection end where the global line comes back beside it
-/// ([`crate::splice::Unfold`]).
+/// [`merge_polyline`] for a line that does not fold onto itself: the global points kept or
+/// refitted on either side of the detection end where the global line comes back within `gap`
+/// metres beside it ([`crate::splice::Unfold`]).
 pub fn merge_line(
     global: &[Point],
     detected: &[Point],
     s: f64,
     spacing: f64,
+    gap: f64,
 ) -> Result<Vec<Point>> {
-    merge_open(global, detected, s, spacing, true)
+    check_non_negative("gap", gap)?;
+    merge_open(global, detected, s, spacing, Some(gap))
 }
 
 fn merge_open(
@@ -285,7 +287,7 @@ fn merge_open(
     detected: &[Point],
     s: f64,
     spacing: f64,
-    unfold: bool,
+    unfold: Option<f64>,
 ) -> Result<Vec<Point>> {
     validate_points(global, 2, "global polyline")?;
     validate_points(detected, 2, "detected polyline")?;
@@ -331,7 +333,7 @@ fn merge_open(
     // Global points by arc length: kept as they are | refitted with the detection | replaced by
     // it | refitted | kept.
     let (lo, hi) = (s_lo - margin, s_hi + margin);
-    let kept = unfold.then(|| Unfold::new(&d).trim(&g, &gcum, lo, hi));
+    let kept = unfold.map(|gap| Unfold::new(&d, gap).trim(&g, &gcum, lo, hi));
     let stored = |keep: &dyn Fn(f64) -> bool| -> Vec<Point> {
         g.iter()
             .zip(&gcum)
@@ -421,6 +423,7 @@ mod tests {
     use super::*;
     use crate::clip::signed_area2;
     use crate::resample::dedup;
+    use crate::splice::LANE_FOLD;
     use crate::test_util::p;
     use proptest::prelude::*;
 
@@ -586,13 +589,13 @@ mod tests {
         let d = pts(&[[12.0, 0.1], [18.0, 0.1], [26.0, 0.1]]);
         let turns_back = |out: &[Point]| out.windows(2).any(|w| w[1].x < w[0].x - 1e-9);
         assert!(turns_back(&merge_polyline(&g, &d, 0.5, 1.0).unwrap()));
-        let out = merge_line(&g, &d, 0.5, 1.0).unwrap();
+        let out = merge_line(&g, &d, 0.5, 1.0, LANE_FOLD).unwrap();
         assert!(!turns_back(&out), "{out:?}");
         assert!((out[0] - p(0.0, 0.0)).norm() < 1e-9 && (out[out.len() - 1].x - 26.0).abs() < 0.2);
         // without a hook both rules merge alike
         let straight = pts(&[[0.0, 0.0], [20.0, 0.0]]);
         assert_eq!(
-            merge_line(&straight, &d, 0.5, 1.0).unwrap(),
+            merge_line(&straight, &d, 0.5, 1.0, LANE_FOLD).unwrap(),
             merge_polyline(&straight, &d, 0.5, 1.0).unwrap()
         );
     }

@@ -11,8 +11,9 @@
 //! 3. the result is the stored points before the projection of `new`'s start onto `stored`, then
 //!    `new`, then the stored points after the projection of its end (arc lengths along `stored`).
 //!
-//! A lane line does not turn back ([`splice_line`], the store's rule for dividers): there the kept
-//! stored points on either side end where the stored line comes back beside `new` ([`Unfold`]).
+//! A line does not fold onto itself ([`splice_line`], the store's rule for lane lines and kerbs):
+//! there the kept stored points on either side end where the stored line comes back beside `new`
+//! ([`Unfold`]), within the class's fold gap ([`crate::types::MapClass::fold_gap`]).
 
 use crate::error::Result;
 use crate::resample::polyline_length;
@@ -72,32 +73,42 @@ pub fn orient_like(stored: &[Point], new: &[Point]) -> Vec<Point> {
     }
 }
 
-/// Metres: a stored point of a line this near the interior of a new observation (its nearest
-/// point on the observation more than this from either end) lies on the stretch the observation
-/// replaced. Neighbouring lane lines lie further apart.
-pub const BESIDE: f64 = 1.5;
+/// Metres: a stored point of a lane line this near the interior of a new observation lies on the
+/// stretch the observation replaced. Neighbouring lane lines lie further apart.
+pub const LANE_FOLD: f64 = 1.5;
+
+/// Metres: the same for a kerb. A kerb may turn around a median island (1.5-4 m wide in the
+/// synthetic cities), whose other side lies further than this; a kerb folded onto itself by the
+/// merges (validation drives: a quarter to two fifths of IC-Mapper's map kerbs) lies nearer.
+pub const KERB_FOLD: f64 = 1.0;
+
+/// Metres: a stored point beside an observation nearer than this to one of its ends is not
+/// beside its interior (there the two lines part).
+pub const END_MARGIN: f64 = 1.5;
 
 /// Where a stored line turns back along a new observation `q` (oriented like it). A stored line
 /// whose end hooks off (a skeleton's end bending toward a neighbour) and a view that runs on past
 /// that end: the view's end projects onto the hook, so the hook's tip counts as lying after the
 /// view and, kept, it was joined behind the view's end, a line that turns back on itself; each
 /// later view that reached past it drew the fold longer (validation drives: 17 % of IC-Mapper's
-/// map dividers lay on themselves, `eval.fragmentation`'s `folded`; docs/mapping.md). A stored point comes back when it lies within [`BESIDE`] of the
-/// observation's interior ([`Unfold::beside`]). Only an observation that
-/// runs along the line is a reason to cut it ([`Unfold::along`]); a view across it (a stub) cuts
-/// nothing.
+/// map dividers lay on themselves, `eval.fragmentation`'s `folded`; docs/mapping.md). A stored
+/// point comes back when it lies within the fold gap of the observation's interior
+/// ([`Unfold::beside`]). Only an observation that runs along the line is a reason to cut it
+/// ([`Unfold::along`]); a view across it (a stub) cuts nothing.
 pub struct Unfold<'a> {
     q: &'a [Point],
     len: f64,
+    gap: f64,
 }
 
 impl<'a> Unfold<'a> {
     /// The rule for the new observation `q` (open, at least 2 points, oriented like the stored
-    /// line).
-    pub fn new(q: &'a [Point]) -> Self {
+    /// line) and the fold gap `gap` (metres; [`LANE_FOLD`], [`KERB_FOLD`]).
+    pub fn new(q: &'a [Point], gap: f64) -> Self {
         Unfold {
             q,
             len: polyline_length(q, false),
+            gap,
         }
     }
 
@@ -107,26 +118,41 @@ impl<'a> Unfold<'a> {
         span >= 0.5 * self.len
     }
 
-    /// Whether `p` lies within [`BESIDE`] of the observation's interior: its nearest point on the
-    /// observation more than [`BESIDE`] from either end (a point just past an end, where the two
-    /// lines part, is not beside it).
+    /// Whether `p` lies within the fold gap of the observation's interior: its nearest point on
+    /// the observation more than [`END_MARGIN`] from either end (a point just past an end, where
+    /// the two lines part, is not beside it).
     pub fn beside(&self, p: &Point) -> bool {
         let (d, t) = project_onto_polyline(p, self.q);
-        d <= BESIDE && t > BESIDE && t < self.len - BESIDE
+        d <= self.gap && t > END_MARGIN && t < self.len - END_MARGIN
     }
 
     /// Of the stored line `points` (arc lengths `arc` along it), which are kept when it ends
     /// where it first comes back beside the observation: after `s_end`, every point from the
     /// first one beside it on is dropped; before `s_start`, every point up to the last one. All
-    /// are kept when the observation does not run along the line.
+    /// are kept when the observation does not run along the line. A side is cut only when all
+    /// that its cut drops lies back on the line (within twice the gap of the observation or of
+    /// the stored points kept before it): a fold. Where the stored line goes on elsewhere after
+    /// meeting the view (a kerb that a view rounding a corner meets twice), that side is kept
+    /// whole.
     pub fn trim(&self, points: &[Point], arc: &[f64], s_start: f64, s_end: f64) -> Vec<bool> {
         let n = points.len();
-        if !self.along(s_end - s_start) {
+        if !self.along(s_end - s_start) || n == 0 {
             return vec![true; n];
         }
         let beside: Vec<bool> = points.iter().map(|p| self.beside(p)).collect();
-        let first_after = (0..n).find(|&i| arc[i] > s_end && beside[i]);
-        let last_before = (0..n).rev().find(|&i| arc[i] <= s_start && beside[i]);
+        // whether stored point i lies back on the line: near the view or the stored `part`
+        let on_line = |i: usize, part: &[Point]| {
+            let near = 2.0 * self.gap;
+            project_onto_polyline(&points[i], self.q).0 <= near
+                || (!part.is_empty() && project_onto_polyline(&points[i], part).0 <= near)
+        };
+        let first_after = (0..n)
+            .find(|&i| arc[i] > s_end && beside[i])
+            .filter(|&f| (f..n).all(|i| on_line(i, &points[..f])));
+        let last_before = (0..n)
+            .rev()
+            .find(|&i| arc[i] <= s_start && beside[i])
+            .filter(|&l| (0..=l).all(|i| on_line(i, &points[l + 1..])));
         (0..n)
             .map(|i| !(first_after.is_some_and(|f| i >= f) || last_before.is_some_and(|l| i <= l)))
             .collect()
@@ -137,16 +163,22 @@ impl<'a> Unfold<'a> {
 /// documentation. `overlap` is in metres (finite, >= 0). Errors on too few points, non-finite or
 /// out-of-domain coordinates and a bad `overlap`.
 pub fn splice_polyline(stored: &[Point], new: &[Point], overlap: f64) -> Result<Vec<Point>> {
-    splice(stored, new, overlap, false)
+    splice(stored, new, overlap, None)
 }
 
-/// [`splice_polyline`] for a lane line, which does not turn back: the stored line is cut where it
-/// comes back beside `new` ([`Unfold`]).
-pub fn splice_line(stored: &[Point], new: &[Point], overlap: f64) -> Result<Vec<Point>> {
-    splice(stored, new, overlap, true)
+/// [`splice_polyline`] for a line that does not fold onto itself: the stored line is cut where it
+/// comes back within `gap` metres beside `new` ([`Unfold`]).
+pub fn splice_line(stored: &[Point], new: &[Point], overlap: f64, gap: f64) -> Result<Vec<Point>> {
+    check_non_negative("gap", gap)?;
+    splice(stored, new, overlap, Some(gap))
 }
 
-fn splice(stored: &[Point], new: &[Point], overlap: f64, unfold: bool) -> Result<Vec<Point>> {
+fn splice(
+    stored: &[Point],
+    new: &[Point],
+    overlap: f64,
+    unfold: Option<f64>,
+) -> Result<Vec<Point>> {
     validate_points(stored, 2, "stored polyline")?;
     validate_points(new, 2, "new polyline")?;
     check_non_negative("overlap", overlap)?;
@@ -161,7 +193,7 @@ fn splice(stored: &[Point], new: &[Point], overlap: f64, unfold: bool) -> Result
         }
         arc.push(s_p);
     }
-    let kept = unfold.then(|| Unfold::new(&q).trim(stored, &arc, s_start, s_end));
+    let kept = unfold.map(|gap| Unfold::new(&q, gap).trim(stored, &arc, s_start, s_end));
     let mut before = Vec::new();
     let mut after = Vec::new();
     for (i, p) in stored.iter().enumerate() {
@@ -252,7 +284,7 @@ mod tests {
         let new = pts(&[(26.0, 0.1), (18.0, 0.1), (12.0, 0.1)]);
         let hooked = splice_polyline(&stored, &new, 0.5).unwrap();
         assert_eq!(hooked[hooked.len() - 1], Point::new(20.0, -0.9)); // joined behind the view
-        let out = splice_line(&stored, &new, 0.5).unwrap();
+        let out = splice_line(&stored, &new, 0.5, LANE_FOLD).unwrap();
         assert_eq!(
             out,
             pts(&[
@@ -271,22 +303,69 @@ mod tests {
             (14.0, 0.8),
             (4.0, 0.8),
         ]);
-        let out = splice_line(&folded, &pts(&[(12.0, 0.0), (24.0, 0.0)]), 0.3).unwrap();
+        let out = splice_line(&folded, &pts(&[(12.0, 0.0), (24.0, 0.0)]), 0.3, LANE_FOLD).unwrap();
         assert_eq!(out, pts(&[(0.0, 0.0), (12.0, 0.0), (24.0, 0.0)]));
-        // at the start too; a stretch further than BESIDE from the view is kept
+        // at the start too; a stretch further than LANE_FOLD from the view is kept
         let rev: Vec<Point> = folded.iter().rev().copied().collect();
-        let out = splice_line(&rev, &pts(&[(24.0, 0.0), (12.0, 0.0)]), 0.3).unwrap();
+        let out = splice_line(&rev, &pts(&[(24.0, 0.0), (12.0, 0.0)]), 0.3, LANE_FOLD).unwrap();
         assert_eq!(out, pts(&[(24.0, 0.0), (12.0, 0.0), (0.0, 0.0)]));
         // a view across the line (a stub) cuts nothing
         let line = pts(&[(0.0, 0.0), (10.0, 0.0), (20.0, 0.0)]);
         let stub = pts(&[(19.0, -3.0), (19.0, 3.0)]);
         assert_eq!(
-            splice_line(&line, &stub, 0.5).unwrap(),
+            splice_line(&line, &stub, 0.5, LANE_FOLD).unwrap(),
             splice_polyline(&line, &stub, 0.5).unwrap()
         );
         let u_turn = pts(&[(0.0, 0.0), (20.0, 0.0), (20.0, -3.0), (8.0, -3.0)]);
-        let out = splice_line(&u_turn, &pts(&[(4.0, 0.1), (16.0, 0.1)]), 0.5).unwrap();
+        let out = splice_line(&u_turn, &pts(&[(4.0, 0.1), (16.0, 0.1)]), 0.5, LANE_FOLD).unwrap();
         assert_eq!(out[out.len() - 1], Point::new(8.0, -3.0));
+    }
+
+    #[test]
+    fn a_kerb_folds_within_its_own_gap_only() {
+        // a kerb around a median 1.4 m wide: its other side is kept with the kerb's gap
+        let median = pts(&[
+            (0.0, 0.0),
+            (20.0, 0.0),
+            (20.5, -0.7),
+            (20.0, -1.4),
+            (8.0, -1.4),
+        ]);
+        let view = pts(&[(4.0, 0.0), (16.0, 0.0)]);
+        let far_side = |out: &[Point], y: f64| out.contains(&Point::new(8.0, y));
+        assert!(far_side(
+            &splice_line(&median, &view, 0.5, KERB_FOLD).unwrap(),
+            -1.4
+        ));
+        // the lane lines' gap would cut it
+        assert!(!far_side(
+            &splice_line(&median, &view, 0.5, LANE_FOLD).unwrap(),
+            -1.4
+        ));
+        // a kerb the merges folded 0.8 m onto itself is cut
+        let folded = pts(&[
+            (0.0, 0.0),
+            (20.0, 0.0),
+            (20.4, -0.4),
+            (20.0, -0.8),
+            (8.0, -0.8),
+        ]);
+        assert!(!far_side(
+            &splice_line(&folded, &view, 0.5, KERB_FOLD).unwrap(),
+            -0.8
+        ));
+        assert!(splice_line(&folded, &view, 0.5, -1.0).is_err());
+        // a line that meets the view again and then goes on far (more than a fold along the
+        // view can hold) is kept whole on that side
+        let onward = pts(&[
+            (0.0, 0.0),
+            (20.0, 0.0),
+            (20.4, -0.4),
+            (14.0, -0.8),
+            (14.0, -60.0),
+        ]);
+        let out = splice_line(&onward, &view, 0.5, KERB_FOLD).unwrap();
+        assert_eq!(out[out.len() - 1], Point::new(14.0, -60.0));
     }
 
     #[test]

@@ -57,11 +57,18 @@ impl MapClass {
         matches!(self, MapClass::PedCrossing)
     }
 
-    /// Whether instances of this class never turn back on themselves (lane dividers; a kerb may
-    /// turn around a narrow island): the store merges and splices them by the rules that cut a
-    /// stored line where it comes back beside a new view ([`crate::splice::Unfold`]).
-    pub fn never_turns_back(self) -> bool {
-        matches!(self, MapClass::Divider)
+    /// Metres within which a stored line of this class that comes back beside a new view is a
+    /// fold of the merges, not the line's own course: the store merges and splices lines by the
+    /// rules that cut the stored line there ([`crate::splice::Unfold`]). Lane lines
+    /// [`crate::splice::LANE_FOLD`] (neighbouring lanes lie further apart), kerbs
+    /// [`crate::splice::KERB_FOLD`] (a kerb around a median island comes back further away);
+    /// `None` for crossings.
+    pub fn fold_gap(self) -> Option<f64> {
+        match self {
+            MapClass::PedCrossing => None,
+            MapClass::Divider => Some(crate::splice::LANE_FOLD),
+            MapClass::Boundary => Some(crate::splice::KERB_FOLD),
+        }
     }
 
     /// The class index (0, 1, 2).

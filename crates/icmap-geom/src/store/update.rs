@@ -43,7 +43,8 @@ pub fn wake_merge_workers() {
 
 /// The class rule of a merge: the detection `points` (world frame) merged into the current
 /// geometry `current` of an instance (polygon union for a closed crossing ring, curve-fit merge for
-/// a polyline; for a lane divider one that does not turn back, [`merge_line`]), checked to keep
+/// a polyline; for a line class one that does not fold onto itself, [`merge_line`] with the
+/// class's [`MapClass::fold_gap`]), checked to keep
 /// the store's invariants.
 fn merge_rule(
     class: MapClass,
@@ -60,12 +61,10 @@ fn merge_rule(
         merge_polygon(current, &ring, config.spacing)?
     } else {
         validate_points(points, 2, "detected polyline")?;
-        let rule = if class.never_turns_back() {
-            merge_line
-        } else {
-            merge_polyline
-        };
-        rule(current, points, config.smoothing, config.spacing)?
+        match class.fold_gap() {
+            Some(gap) => merge_line(current, points, config.smoothing, config.spacing, gap)?,
+            None => merge_polyline(current, points, config.smoothing, config.spacing)?,
+        }
     };
     validate_points(&merged, if closed { 3 } else { 2 }, "merged geometry")?;
     Ok(merged)
@@ -255,7 +254,7 @@ impl GlobalMap {
 
     /// Splices the open polyline `points` into instance `id` ([`crate::splice::splice_polyline`]
     /// with `overlap` metres: the stretch it covers is replaced, the rest kept on either side; a
-    /// lane divider by [`crate::splice::splice_line`], which does not turn back),
+    /// lane line or kerb by [`crate::splice::splice_line`], which does not fold onto itself),
     /// then resamples at `spacing` as [`Self::replace`] does, as a new observation at `frame`.
     /// Errors on an unknown id, a crossing (closed) instance, bad geometry or a bad `overlap`; the
     /// instance is then unchanged.
@@ -270,12 +269,10 @@ impl GlobalMap {
                 reason: format!("instance {id} is a crossing; splicing applies to polylines"),
             });
         }
-        let rule = if inst.class.never_turns_back() {
-            crate::splice::splice_line
-        } else {
-            crate::splice::splice_polyline
+        let spliced = match inst.class.fold_gap() {
+            Some(gap) => crate::splice::splice_line(&inst.points, points, overlap, gap)?,
+            None => crate::splice::splice_polyline(&inst.points, points, overlap)?,
         };
-        let spliced = rule(&inst.points, points, overlap)?;
         let stored = self.prepare(inst.class, &spliced)?;
         self.commit(slot, id, stored, 1, frame)
     }
