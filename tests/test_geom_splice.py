@@ -130,25 +130,55 @@ def test_splice_rejects_bad_input_and_keeps_the_map() -> None:
         m.splice(99, line, 0.5, frame=1)
 
 
-def test_a_lane_line_does_not_turn_back() -> None:
-    """A stored divider whose end hooks off by 0.9 m, and a view that runs on past it (sim:val:4,
-    sim-10041-1, frame 16): the store's splice and merge of a divider end the stored line where
-    it comes back beside the view, instead of joining the hook's tip behind the view's end (a
-    line folded back on itself, drawn longer by every later view). A boundary keeps the general
-    rule (a kerb may turn around a narrow island)."""
+def test_a_line_does_not_fold_onto_itself() -> None:
+    """A stored line whose end hooks off by 0.9 m, and a view that runs on past it (sim:val:4,
+    sim-10041-1, frame 16): the store's splice and merge of a divider or a kerb end the stored
+    line where it comes back beside the view, instead of joining the hook's tip behind the view's
+    end (a line folded back on itself, drawn longer by every later view). A kerb around a median
+    (its other side 1.4 m away) keeps its U-turn: the kerbs' fold gap is 1.0 m, the lane lines'
+    1.5 m."""
     hooked = np.array([[0.0, 0.0], [10.0, 0.0], [20.0, 0.0], [20.0, -0.9]])
+    median = np.array([[0.0, 0.0], [20.0, 0.0], [20.5, -0.7], [20.0, -1.4], [8.0, -1.4]])
     view = np.array([[26.0, 0.1], [18.0, 0.1], [12.0, 0.1]])
     for merge in ("splice", "merge"):
         m = GlobalMap(0.5, 0.5)
         m.insert_with_id(1, 1, hooked, frame=0)  # a divider
         m.insert_with_id(2, 2, hooked, frame=0)  # a boundary
+        m.insert_with_id(3, 2, median, frame=0)  # a kerb around a median
+        m.insert_with_id(4, 1, median, frame=0)  # a divider drawn so: folded
+        for i in (1, 2, 3, 4):
+            if merge == "splice":
+                m.splice(i, view, 0.5, frame=1)
+            else:
+                m.merge(i, view, frame=1)
+        for i in (1, 2):
+            line = m.get(i)[1]
+            assert np.all(np.diff(line[:, 0]) > -1e-9), (merge, i)  # never turns back
+            assert line[-1, 0] == pytest.approx(26.0, abs=0.3), (merge, i)
+            assert line[0, 0] == pytest.approx(0.0)
+        kerb, divider = m.get(3)[1], m.get(4)[1]
+        assert kerb[:, 1].min() < -1.3 and kerb[-1, 0] < 10.0, merge  # around the median
+        assert divider[:, 1].min() > -1.3, merge  # a lane line 1.4 m beside itself is a fold
+
+
+def test_a_fold_cut_is_bounded() -> None:
+    """A kerb that comes back beside a view and then goes on far from it (sim:test:4,
+    sim-10158-2: a view rounding a corner met a long kerb twice, and the unbounded cut dropped
+    120 m of it) keeps that side whole; a kerb whose end folds back along the view loses the
+    fold."""
+    onward = np.array([[0.0, 0.0], [20.0, 0.0], [20.4, -0.4], [14.0, -0.8], [14.0, -60.0]])
+    folded = np.array([[0.0, 0.0], [20.0, 0.0], [20.4, -0.4], [14.0, -0.8], [6.0, -0.8]])
+    view = np.array([[4.0, 0.0], [16.0, 0.0]])
+    for merge in ("splice", "merge"):
+        m = GlobalMap(0.5, 0.5)
+        m.insert_with_id(1, 2, onward, frame=0)
+        m.insert_with_id(2, 2, folded, frame=0)
         for i in (1, 2):
             if merge == "splice":
                 m.splice(i, view, 0.5, frame=1)
             else:
                 m.merge(i, view, frame=1)
-        line, kerb = m.get(1)[1], m.get(2)[1]
-        assert np.all(np.diff(line[:, 0]) > -1e-9), merge  # never turns back
-        assert line[-1, 0] == pytest.approx(26.0, abs=0.3) and line[0, 0] == pytest.approx(0.0)
-        # the general rule: the hook's tip joined behind the view, the kerb turns back to it
-        assert kerb[:, 0].max() > 25.0 and np.any(np.diff(kerb[:, 0]) < 0), merge
+        assert m.get(1)[1][:, 1].min() < -59.0, merge  # the kerb going on is kept
+        back = m.get(2)[1]
+        back = back[back[:, 1] < -0.3]  # the hook's points, off the view's line
+        assert back[:, 0].min() > 14.0, merge  # the fold back along the view is cut
