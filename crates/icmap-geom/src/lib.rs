@@ -41,7 +41,7 @@ pub use fit::fit_curve;
 pub use merge::{merge_line, merge_polygon, merge_polyline};
 pub use merge_map::{MergeMapParams, MergeMapStats};
 pub use resample::{dedup, polyline_length, resample, resample_spacing};
-pub use splice::{splice_line, splice_polyline};
+pub use splice::{splice_line, splice_polyline, Fold};
 pub use store::{GlobalMap, Instance, MapConfig, PatchSample};
 pub use types::{validate_points, MapClass, Patch, Point, Pose2};
 pub use union::polygon_union;

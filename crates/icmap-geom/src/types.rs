@@ -57,17 +57,24 @@ impl MapClass {
         matches!(self, MapClass::PedCrossing)
     }
 
-    /// Metres within which a stored line of this class that comes back beside a new view is a
-    /// fold of the merges, not the line's own course: the store merges and splices lines by the
-    /// rules that cut the stored line there ([`crate::splice::Unfold`]). Lane lines
-    /// [`crate::splice::LANE_FOLD`] (neighbouring lanes lie further apart), kerbs
-    /// [`crate::splice::KERB_FOLD`] (a kerb around a median island comes back further away);
+    /// How a stored line of this class is kept from folding onto itself: the store merges and
+    /// splices lines by the rules that cut the stored line where it comes back beside a new view
+    /// ([`crate::splice::Unfold`]). Lane lines within [`crate::splice::LANE_FOLD`] (neighbouring
+    /// lanes lie further apart), unbounded; kerbs within [`crate::splice::KERB_FOLD`] (a kerb
+    /// around a median island comes back further away), bounded to what lies back on the line;
     /// `None` for crossings.
-    pub fn fold_gap(self) -> Option<f64> {
+    pub const fn fold(self) -> Option<crate::splice::Fold> {
+        use crate::splice::{Fold, KERB_FOLD, LANE_FOLD};
         match self {
             MapClass::PedCrossing => None,
-            MapClass::Divider => Some(crate::splice::LANE_FOLD),
-            MapClass::Boundary => Some(crate::splice::KERB_FOLD),
+            MapClass::Divider => Some(Fold {
+                gap: LANE_FOLD,
+                bounded: false,
+            }),
+            MapClass::Boundary => Some(Fold {
+                gap: KERB_FOLD,
+                bounded: true,
+            }),
         }
     }
 

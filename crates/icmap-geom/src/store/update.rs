@@ -44,7 +44,7 @@ pub fn wake_merge_workers() {
 /// The class rule of a merge: the detection `points` (world frame) merged into the current
 /// geometry `current` of an instance (polygon union for a closed crossing ring, curve-fit merge for
 /// a polyline; for a line class one that does not fold onto itself, [`merge_line`] with the
-/// class's [`MapClass::fold_gap`]), checked to keep
+/// class's [`MapClass::fold`]), checked to keep
 /// the store's invariants.
 fn merge_rule(
     class: MapClass,
@@ -61,8 +61,8 @@ fn merge_rule(
         merge_polygon(current, &ring, config.spacing)?
     } else {
         validate_points(points, 2, "detected polyline")?;
-        match class.fold_gap() {
-            Some(gap) => merge_line(current, points, config.smoothing, config.spacing, gap)?,
+        match class.fold() {
+            Some(fold) => merge_line(current, points, config.smoothing, config.spacing, fold)?,
             None => merge_polyline(current, points, config.smoothing, config.spacing)?,
         }
     };
@@ -269,8 +269,8 @@ impl GlobalMap {
                 reason: format!("instance {id} is a crossing; splicing applies to polylines"),
             });
         }
-        let spliced = match inst.class.fold_gap() {
-            Some(gap) => crate::splice::splice_line(&inst.points, points, overlap, gap)?,
+        let spliced = match inst.class.fold() {
+            Some(fold) => crate::splice::splice_line(&inst.points, points, overlap, fold)?,
             None => crate::splice::splice_polyline(&inst.points, points, overlap)?,
         };
         let stored = self.prepare(inst.class, &spliced)?;
