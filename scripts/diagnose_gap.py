@@ -1,0 +1,93 @@
+"""Why a ground-truth instance is not matched in GAP: its nearest map instance, per true instance.
+
+Reads the maps ``scripts/map_experiment.py --maps DIR`` wrote (``DIR/<method>/<drive>.icmap``)
+and the global ground truth of the same drives. For each true instance of one class it finds
+the map instance of that class with the smallest Chamfer distance as GAP measures it (both
+sampled to 200 points along, ``eval.globalmap.gap_samples``; the mean of the two directed mean
+distances) and prints, worst first, those above ``--show`` metres: the true length, the
+distance and its two halves (true to map: the truth the instance leaves uncovered; map to true:
+what it draws elsewhere), the instance's length and observations. A short true piece far from
+everything is a sliver of the visited area; "true to map" large with "map to true" small is a
+line the map holds in several pieces; both large, a line joined to another or missed. Prints
+how many true instances have a match within 0.5, 1.0 and 1.5 m first (an upper bound of GAP's
+recall at each threshold: matches are one-to-one there).
+
+    .venv/bin/python scripts/diagnose_gap.py --source sim:val:12 --maps /tmp/maps/icmapper --cls 2
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import numpy as np
+
+
+def main(argv: list[str] | None = None) -> int:
+    from icmapper.data import gt as gt_mod
+    from icmapper.data.sources import open_source
+    from icmapper.data.types import CLASS_NAMES, RANGE_60x30
+    from icmapper.eval.globalmap import gap_samples, load_global_map
+    from scipy.spatial import cKDTree
+
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--source", required=True)
+    ap.add_argument("--maps", required=True, help="one method's folder of <drive>.icmap files")
+    ap.add_argument("--cls", type=int, default=2, help="class index (0 crossing, 1, 2)")
+    ap.add_argument("--show", type=float, default=1.0, help="list true instances above (m)")
+    a = ap.parse_args(argv)
+    if a.cls not in (0, 1, 2):
+        raise SystemExit(f"--cls must be 0, 1 or 2, got {a.cls}")
+    rows = []
+    for seq in open_source(a.source, render=False):
+        path = Path(a.maps) / f"{seq.name}.icmap"
+        if not path.exists():
+            raise SystemExit(f"no map for drive {seq.name}: {path}")
+        preds = [p for p in load_global_map(path) if p[0] == a.cls]
+        samples = [gap_samples(p[1], p[2]) for p in preds]  # each (200, 2)
+        for g in gt_mod.global_gt(seq, RANGE_60x30):
+            if int(g.cls) != a.cls:
+                continue
+            gs = gap_samples(g.points, g.closed)  # (200, 2)
+            length = float(np.linalg.norm(np.diff(gs, axis=0), axis=1).sum())
+            best = (np.inf, np.nan, np.nan, -1)
+            for k, ps in enumerate(samples):
+                to_map = float(cKDTree(ps).query(gs)[0].mean())
+                to_true = float(cKDTree(gs).query(ps)[0].mean())
+                if 0.5 * (to_map + to_true) < best[0]:
+                    best = (0.5 * (to_map + to_true), to_map, to_true, k)
+            rows.append((seq.name, length, *best))
+    rows.sort(key=lambda r: -r[2])
+    name = CLASS_NAMES[a.cls]
+    print(
+        f"{len(rows)} true {name} instances; nearest map instance within 0.5 / 1.0 / 1.5 m: "
+        + " / ".join(str(sum(r[2] <= t for r in rows)) for t in (0.5, 1.0, 1.5))
+    )
+    print("| drive | true length m | Chamfer m | true to map | map to true | map length m | obs |")
+    print("|---|---|---|---|---|---|---|")
+    for drive, length, cd, to_map, to_true, k in rows:
+        if cd <= a.show:
+            break
+        if k < 0:
+            print(f"| {drive} | {length:.1f} | no map instance | | | | |")
+            continue
+        pts = np.asarray(preds_of(a.maps, drive, a.cls)[k][1])
+        plen = float(np.linalg.norm(np.diff(pts, axis=0), axis=1).sum())
+        obs = preds_of(a.maps, drive, a.cls)[k][3]
+        print(
+            f"| {drive} | {length:.1f} | {cd:.2f} | {to_map:.2f} | {to_true:.2f} | {plen:.1f} "
+            f"| {obs:.0f} |"
+        )
+    return 0
+
+
+def preds_of(maps: str, drive: str, cls: int) -> list:
+    """The map instances of one class of one drive's map, in ``load_global_map`` order."""
+    from icmapper.eval.globalmap import load_global_map
+
+    return [p for p in load_global_map(Path(maps) / f"{drive}.icmap") if p[0] == cls]
+
+
+if __name__ == "__main__":
+    sys.exit(main())
