@@ -157,8 +157,7 @@ class MapperConfig:
             if getattr(self, name) < 1:
                 raise ValueError(f"MapperConfig.{name} must be >= 1, got {getattr(self, name)}")
         for name in ("max_age", "reid_distance", "beside_gate", "fusion_margin", "smoothing",
-                     "merge_behind",
-                     "stub_length"):  # fmt: skip
+                     "merge_behind", "stub_length"):  # fmt: skip
             if not getattr(self, name) >= 0:
                 raise ValueError(f"MapperConfig.{name} must be >= 0, got {getattr(self, name)}")
         if self.fused_merge not in FUSED_MERGES:
