@@ -164,6 +164,13 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--vec", action="append", default=[], metavar="NAME=VALUE")
     ap.add_argument("--cache", default="/tmp/icmapper-bev-cache")
     ap.add_argument("--json", default=None)
+    ap.add_argument(
+        "--gt-join-gap",
+        type=float,
+        default=0.0,
+        help="what-if: the global ground truth joins the visited pieces of a line less than this "
+        "many metres apart along it (data.gt.global_gt; 0: the protocol)",
+    )
     ap.add_argument("--maps", default=None, help="folder for each method's .icmap per drive")
     ap.add_argument(
         "--min-obs", type=int, default=1, help="leave out map instances observed fewer times"
@@ -235,7 +242,7 @@ def main(argv: list[str] | None = None) -> int:
         if not cached:
             src.save(seq.name)
         gts.append(gt_mod.sequence_gt(seq, rng))
-        ggts.append(gt_mod.global_gt(seq, rng))
+        ggts.append(gt_mod.global_gt(seq, rng, a.gt_join_gap))
         print(f"{seq.name}: {time.time() - t0:.0f} s", file=sys.stderr)
     out = {}
     print(

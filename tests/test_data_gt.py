@@ -147,3 +147,17 @@ def test_global_gt_is_union_of_visited_patches() -> None:
     assert len(ids) == len(set(ids))
     cross = [i for i in glob if i.cls == MapClass.PED_CROSSING]
     assert len(cross) == 1 and cross[0].closed
+
+
+@pytest.mark.parametrize("join_gap, want", [(0.0, 2), (39.0, 2), (41.0, 1)])
+def test_global_gt_join_gap_joins_pieces_of_one_line(join_gap: float, want: int) -> None:
+    """The what-if of the diagnosis: visited pieces of one line less than ``join_gap`` apart
+    along it count as one (the 40 m gap x in [50, 90] above); 0 is the protocol."""
+    seq = _seq(np.array([0.0, 10.0, 20.0, 120.0]))
+    glob = gt.global_gt(seq, RANGE_60x30, join_gap)
+    line = [i for i in glob if i.id // 1000 == 1]
+    assert len(line) == want
+    if want == 1:
+        assert np.allclose([line[0].points[:, 0].min(), line[0].points[:, 0].max()], [-30, 150])
+    with pytest.raises(ValueError, match="join_gap"):
+        gt.global_gt(seq, RANGE_60x30, -1.0)

@@ -320,9 +320,10 @@ def _cut(line: NDArray[np.float64], s0: float, s1: float) -> NDArray[np.float64]
 
 
 def _polyline_parts(
-    line: NDArray[np.float64], pieces: list[NDArray[np.float64]]
+    line: NDArray[np.float64], pieces: list[NDArray[np.float64]], join_gap: float = 0.0
 ) -> list[NDArray[np.float64]]:
-    """The union of `pieces` (sub-polylines of `line`) as disjoint sub-polylines, in order.
+    """The union of `pieces` (sub-polylines of `line`) as disjoint sub-polylines, in order;
+    pieces less than `join_gap` metres apart along `line` count as one (the gap included).
 
     Works on arc-length intervals; for a loop (first point == last) intervals may run past the
     seam and are unrolled on the doubled line.
@@ -332,7 +333,7 @@ def _polyline_parts(
     intervals = sorted((s, s + _length(p, False)) for p in pieces for s in [_arc_start(line, p[0])])
     merged: list[list[float]] = []
     for s0, s1 in intervals:
-        if merged and s0 <= merged[-1][1] + 1e-6:
+        if merged and s0 <= merged[-1][1] + max(join_gap, 1e-6):
             merged[-1][1] = max(merged[-1][1], s1)
         else:
             merged.append([s0, s1])
@@ -349,10 +350,14 @@ def _polyline_parts(
     return [_cut(line, s0, s1) for s0, s1 in merged if s1 - s0 > MIN_LENGTH]
 
 
-def global_gt(seq: Sequence, rng: PerceptionRange) -> list[MapInstance]:
+def global_gt(seq: Sequence, rng: PerceptionRange, join_gap: float = 0.0) -> list[MapInstance]:
     """World instances clipped to the union of the patches (`rng` around every pose) the ego
-    visited -> global GT instances in the world frame (see the module docstring for ids)."""
-    return visited_gt(seq.world, seq.poses, rng)
+    visited -> global GT instances in the world frame (see the module docstring for ids).
+    `join_gap` (metres, 0: the protocol) joins the visited pieces of a line less than that apart
+    along it: a what-if of the diagnosis (`scripts/map_experiment.py --gt-join-gap`), since a
+    line at the edge of the range enters and leaves the visited patches as the car's heading
+    wavers and is kept as a dashed line (docs/mapping.md, "What bounds GAP now")."""
+    return visited_gt(seq.world, seq.poses, rng, join_gap)
 
 
 def city_gt(seqs: list[Sequence], rng: PerceptionRange) -> list[MapInstance]:
@@ -369,9 +374,12 @@ def city_gt(seqs: list[Sequence], rng: PerceptionRange) -> list[MapInstance]:
 
 
 def visited_gt(
-    world: WorldMap, poses: NDArray[np.float64], rng: PerceptionRange
+    world: WorldMap, poses: NDArray[np.float64], rng: PerceptionRange, join_gap: float = 0.0
 ) -> list[MapInstance]:
-    """World instances clipped to the union of the patches (`rng` around every pose (T, 4, 4))."""
+    """World instances clipped to the union of the patches (`rng` around every pose (T, 4, 4));
+    `join_gap`: see `global_gt`."""
+    if not join_gap >= 0:
+        raise ValueError(f"visited_gt: join_gap must be >= 0, got {join_gap}")
     from icmapper import geom
 
     xyy = [pose_to_xy_yaw(p) for p in poses]
@@ -391,7 +399,7 @@ def visited_gt(
             parts = [np.asarray(r, dtype=np.float64) for r in geom.polygon_union(pieces)]
             parts = [r for r in parts if len(r) >= 3 and _area(r) > MIN_AREA]
         else:
-            parts = _polyline_parts(inst.points, pieces)
+            parts = _polyline_parts(inst.points, pieces, join_gap)
         for j, part in enumerate(parts):
             out.append(
                 MapInstance(inst.id * PIECE_FACTOR + j, inst.cls, part, inst.closed, inst.style)
