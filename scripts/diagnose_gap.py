@@ -40,11 +40,12 @@ def main(argv: list[str] | None = None) -> int:
     if a.cls not in (0, 1, 2):
         raise SystemExit(f"--cls must be 0, 1 or 2, got {a.cls}")
     rows = []
+    preds_of: dict[str, list] = {}  # drive -> its map's instances of the class
     for seq in open_source(a.source, render=False):
         path = Path(a.maps) / f"{seq.name}.icmap"
         if not path.exists():
             raise SystemExit(f"no map for drive {seq.name}: {path}")
-        preds = [p for p in load_global_map(path) if p[0] == a.cls]
+        preds = preds_of[seq.name] = [p for p in load_global_map(path) if p[0] == a.cls]
         samples = [gap_samples(p[1], p[2]) for p in preds]  # each (200, 2)
         for g in gt_mod.global_gt(seq, RANGE_60x30):
             if int(g.cls) != a.cls:
@@ -72,21 +73,13 @@ def main(argv: list[str] | None = None) -> int:
         if k < 0:
             print(f"| {drive} | {length:.1f} | no map instance | | | | |")
             continue
-        pts = np.asarray(preds_of(a.maps, drive, a.cls)[k][1])
-        plen = float(np.linalg.norm(np.diff(pts, axis=0), axis=1).sum())
-        obs = preds_of(a.maps, drive, a.cls)[k][3]
+        _, pts, _, obs = preds_of[drive][k]
+        plen = float(np.linalg.norm(np.diff(np.asarray(pts), axis=0), axis=1).sum())
         print(
             f"| {drive} | {length:.1f} | {cd:.2f} | {to_map:.2f} | {to_true:.2f} | {plen:.1f} "
             f"| {obs:.0f} |"
         )
     return 0
-
-
-def preds_of(maps: str, drive: str, cls: int) -> list:
-    """The map instances of one class of one drive's map, in ``load_global_map`` order."""
-    from icmapper.eval.globalmap import load_global_map
-
-    return [p for p in load_global_map(Path(maps) / f"{drive}.icmap") if p[0] == cls]
 
 
 if __name__ == "__main__":

@@ -238,7 +238,8 @@ def main(argv: list[str] | None = None) -> int:
                 d = Path(a.maps) / n
                 d.mkdir(parents=True, exist_ok=True)
                 gmap.save(str(d / f"{seq.name}.icmap"))
-        seen.append(tracked_world(rec.records, seq.poses, cfg.track_threshold))
+        if a.directions:  # what the detections saw, for "detected, not mapped"
+            seen.append(tracked_world(rec.records, seq.poses, cfg.track_threshold))
         if not cached:
             src.save(seq.name)
         gts.append(gt_mod.sequence_gt(seq, rng))
