@@ -168,13 +168,58 @@ def test_map_nms_removes_stubs_across_lanes_only() -> None:
     lane = gm.insert(1, line(0, 60, 0).astype(np.float64))
     across = gm.insert(1, np.array([[20.0, -2.0], [20.0, 2.0]]))  # 4 m, at 90 degrees: a stub
     slant = gm.insert(1, np.array([[30.0, -3.0], [37.15, 3.0]]))  # 9.3 m at 40 degrees: kept
-    long_ = gm.insert(1, np.array([[45.0, -6.0], [45.0, 6.0]]))  # 12 m across: kept
+    long_ = gm.insert(1, np.array([[45.0, -8.0], [45.0, 8.0]]))  # 16 m across: kept
     kerb = gm.insert(2, np.array([[10.0, -2.0], [10.0, 2.0]]))  # another class: kept
     apart = gm.insert(1, np.array([[70.0, -2.0], [70.0, 2.0]]))  # crosses nothing: kept
     assert stubs_across(gm, 10.0, 45.0) == [across]
+    assert stubs_across(gm, 15.0, 45.0) == [across]  # the default length
+    assert stubs_across(gm, 20.0, 45.0) == [across, long_]
     assert stubs_across(gm, 0.0, 45.0) == []  # off
     assert map_nms(gm, MapperConfig()) == 1
     assert sorted(int(i) for i in gm.ids()) == sorted([lane, slant, long_, kerb, apart])
+
+
+def test_is_stub_and_drop_stubs_on_a_hand_made_map() -> None:
+    """IC-Mapper's online rule (``drop_stubs``): a short divider across a longer stored one is a
+    stub; ``drop_stubs`` removes the stubs among the touched dividers and their neighbours, the
+    stub itself or the line it crosses being touched."""
+    from icmapper import GlobalMap
+    from icmapper.mapping.map_nms import drop_stubs, is_stub
+
+    gm = GlobalMap()
+    lane = gm.insert(1, line(0, 60, 0).astype(np.float64))
+    across = np.array([[20.0, -2.0], [20.0, 2.0]])  # 4 m at 90 degrees
+    assert is_stub(gm, across, 15.0, 45.0)
+    assert not is_stub(gm, across, 0.0, 45.0)  # off
+    assert not is_stub(gm, across + [0.0, 3.0], 15.0, 45.0)  # ends before the line
+    assert not is_stub(gm, np.array([[30.0, -3.0], [37.15, 3.0]]), 15.0, 45.0)  # 40 degrees
+    assert not is_stub(gm, np.array([[45.0, -8.0], [45.0, 8.0]]), 15.0, 45.0)  # 16 m
+    kerb = gm.insert(2, across)  # another class: never a stub
+    stub = gm.insert(1, across + [10.0, 0.0])
+    # its own id is skipped: a stored stub is tested against the others
+    assert is_stub(gm, gm.get(stub)[1], 15.0, 45.0, skip=stub)
+    assert drop_stubs(gm, [kerb], 15.0, 45.0) == []  # nothing touched among the dividers
+    assert drop_stubs(gm, [lane], 0.0, 45.0) == []  # off
+    assert drop_stubs(gm, [lane], 15.0, 45.0) == [stub]  # the line it crosses was touched
+    later = gm.insert(1, across + [35.0, 0.0])
+    assert drop_stubs(gm, [later, 999], 15.0, 45.0) == [later]  # the stub itself; unknown ids
+    assert sorted(int(i) for i in gm.ids()) == sorted([lane, kerb])
+
+
+#: Frames 0-2: a long lane line; frame 1 also a 5 m stub across it (0.9 scores: confirmed at
+#: once).
+CROSSED = {i: [(1, line(-25, 25, 2.0))] for i in range(3)}
+CROSSED[1] = CROSSED[1] + [(1, np.stack([np.full(20, 3.0), np.linspace(-0.5, 4.5, 20)], -1))]
+
+
+@pytest.mark.parametrize("drop", [True, False])
+def test_the_mapper_keeps_stubs_across_lanes_out(still: Sequence, drop: bool) -> None:
+    """With ``drop_stubs`` (the default) a stub seen across a stored lane line never enters the
+    map; without it, it does (and ``stats.stubs`` counts nothing)."""
+    m = Mapper(Scripted(CROSSED), config=MapperConfig(drop_stubs=drop))
+    map_sequence(m, _three(still), with_images=False)
+    assert len(m.global_map) == (1 if drop else 2)
+    assert m.stats.stubs == 0  # kept out at insertion, not removed later
 
 
 def test_a_confident_first_sighting_enters_the_map_at_once(still: Sequence) -> None:

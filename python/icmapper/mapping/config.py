@@ -64,9 +64,13 @@ class MapperConfig:
         "same-class neighbour, remove stubs across lanes (mapping.map_nms)",
     )
     stub_length: float = _f(
-        10.0, "map_nms: metres under which a divider crossing a longer one is a stub (0: keep all)"
+        15.0,
+        "map_nms and drop_stubs: metres under which a divider crossing a longer one is a stub "
+        "(0: keep all)",
     )
-    stub_angle: float = _f(45.0, "map_nms: degrees at which a stub crosses the longer divider")
+    stub_angle: float = _f(
+        45.0, "map_nms and drop_stubs: degrees at which a stub crosses the longer divider"
+    )
     positional_scale: float = _f(
         1.5,
         "metres; positional affinity exp(-chamfer/scale) (no query features, Post-Track); with "
@@ -111,6 +115,13 @@ class MapperConfig:
         "metres; a lane-line view running beside its instance (most of it farther than this, "
         "mapping.passed.lies_beside) shows another line: its track leaves the instance and the "
         "view goes in as a new one (0: off)",
+    )
+    drop_stubs: bool = _f(
+        True,
+        "lane lines do not cross: a new lane-line instance shorter than stub_length that "
+        "crosses a longer stored divider at more than stub_angle is not inserted (its track may "
+        "enter later with a view along the lanes), and such a stub among the dividers a step "
+        "touched and their neighbours is removed (mapping.map_nms.drop_stubs)",
     )
     splice_overlap: float = _f(0.5, "metres within which a spliced fused polyline replaces points")
     fused_clip: bool = _f(

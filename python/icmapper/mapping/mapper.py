@@ -57,6 +57,7 @@ from icmapper.mapping.associate import association_scores
 from icmapper.mapping.config import MapperConfig
 from icmapper.mapping.crossings import CrossingMerger
 from icmapper.mapping.fuse import fuse_with_history
+from icmapper.mapping.map_nms import drop_stubs
 from icmapper.mapping.merge import merge_frame
 from icmapper.mapping.network_source import NetworkDetector
 from icmapper.mapping.reid import instance_ids, reidentify
@@ -387,9 +388,11 @@ class Mapper:
     def _absorb(self, touched: list[int]) -> None:
         """Instances this step inserted or merged into absorb the same-class neighbours they lie
         on, or are absorbed by them (``mapping.absorb``); aliases follow."""
-        self.stats.absorbed += absorb_touched(
-            self._map, self.crossings, self._alias, self.config, touched
-        )
+        cfg = self.config
+        self.stats.absorbed += absorb_touched(self._map, self.crossings, self._alias, cfg, touched)
+        if cfg.drop_stubs:  # lane lines do not cross (mapping.map_nms)
+            touched = [i for i in touched if i in self._map]
+            self.stats.stubs += len(drop_stubs(self._map, touched, cfg.stub_length, cfg.stub_angle))
 
 
 def _select(d: Detections, keep: NDArray[np.bool_]) -> Detections:

@@ -30,6 +30,7 @@ from numpy.typing import NDArray
 from icmapper.data.types import MapClass, ego_to_world
 from icmapper.mapping.config import MapperConfig
 from icmapper.mapping.crossings import CrossingMerger
+from icmapper.mapping.map_nms import is_stub
 from icmapper.mapping.passed import fresh_runs, lies_beside
 from icmapper.mapping.splice import clip_to_detected, splice_into
 from icmapper.mapping.tracker import Tracker
@@ -134,6 +135,12 @@ def merge_frame(
         if tentative and not (
             scores[j] >= config.confirm_score and (not crossing or crossings.confirmable(fused[j]))
         ):
+            continue
+        if (
+            config.drop_stubs
+            and int(classes[j]) == MapClass.DIVIDER
+            and is_stub(global_map, world, config.stub_length, config.stub_angle)
+        ):  # a stub across the lanes: lane lines do not cross (mapping.map_nms)
             continue
         try:
             global_map.insert_with_id(tid, int(classes[j]), world, frame=frame_index)
