@@ -182,3 +182,25 @@ def test_a_fold_cut_is_bounded() -> None:
         back = m.get(2)[1]
         back = back[back[:, 1] < -0.3]  # the hook's points, off the view's line
         assert back[:, 0].min() > 14.0, merge  # the fold back along the view is cut
+
+
+def test_a_kerb_drawn_past_a_corner_loses_the_overshoot() -> None:
+    """A kerb the detector drew a few metres past a corner and a view that turns the corner: the
+    overshoot (within ``KERB_SLACK``, 8 m, of what a cut may drop off the line) is cut, not
+    joined behind the view's end, where every later view along the new side drew the fold longer
+    (sim:val:12, sim-10016-7: 143 m)."""
+    stored = np.array([[0.0, 0.0], [10.0, 0.0], [20.0, 0.0], [20.8, 0.0], [23.0, 0.0], [26.0, 0.0]])
+    view = np.array([[4.0, 0.1], [12.0, 0.1], [20.2, 0.2], [20.4, 5.0], [20.4, 15.0]])
+    longer = np.vstack([stored, [[40.0, 0.0]]])  # 20 m past the corner: a kerb going on
+    for merge in ("splice", "merge"):
+        m = GlobalMap(0.5, 0.5)
+        m.insert_with_id(1, 2, stored, frame=0)
+        m.insert_with_id(2, 2, longer, frame=0)
+        for i in (1, 2):
+            if merge == "splice":
+                m.splice(i, view, 0.5, frame=1)
+            else:
+                m.merge(i, view, frame=1)
+        kerb = m.get(1)[1]
+        assert kerb[:, 0].max() < 21.0 and kerb[-1, 1] > 14.0, merge  # ends where the view does
+        assert m.get(2)[1][:, 0].max() > 39.0, merge  # the kerb going on is kept

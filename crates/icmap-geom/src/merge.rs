@@ -278,7 +278,7 @@ pub fn merge_line(
     spacing: f64,
     fold: Fold,
 ) -> Result<Vec<Point>> {
-    check_non_negative("gap", fold.gap)?;
+    fold.check()?;
     merge_open(global, detected, s, spacing, Some(fold))
 }
 
@@ -425,7 +425,7 @@ mod tests {
     use crate::resample::dedup;
     const LANE: Fold = Fold {
         gap: crate::splice::LANE_FOLD,
-        bounded: false,
+        slack: f64::INFINITY,
     };
     use crate::test_util::p;
     use proptest::prelude::*;

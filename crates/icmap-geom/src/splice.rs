@@ -88,12 +88,33 @@ pub struct Fold {
     /// Metres: a stored point this near the interior of a new observation lies on the stretch
     /// the observation replaced ([`LANE_FOLD`], [`KERB_FOLD`]).
     pub gap: f64,
-    /// Whether a cut is bounded to what lies back on the line ([`Unfold::trim`]). Kerbs: a view
-    /// rounding a corner can meet a long kerb twice, and the unbounded cut dropped 120 m of it
-    /// (sim:test:4, docs/mapping.md). Lane lines keep the unbounded cut of the sixteenth round:
-    /// bounded, more of their folds stayed (validation drives: divider GAP 77.1 -> 75.0).
-    pub bounded: bool,
+    /// Metres of what a cut drops that may lie off the line ([`Unfold::trim`]; infinite: the cut
+    /// is unbounded). Kerbs ([`KERB_SLACK`]): a view rounding a corner can meet a long kerb twice,
+    /// and the unbounded cut dropped 120 m of it (sim:test:4, docs/mapping.md). Lane lines keep
+    /// the unbounded cut of the sixteenth round: bounded, more of their folds stayed (validation
+    /// drives: divider GAP 77.1 -> 75.0).
+    pub slack: f64,
 }
+
+impl Fold {
+    /// Errors on a gap that is not finite and >= 0 or a slack that is not >= 0 (infinite allowed).
+    pub fn check(&self) -> Result<()> {
+        check_non_negative("gap", self.gap)?;
+        if self.slack.is_nan() || self.slack < 0.0 {
+            return Err(crate::error::GeomError::InvalidParameter {
+                name: "slack",
+                reason: format!("must be >= 0, got {}", self.slack),
+            });
+        }
+        Ok(())
+    }
+}
+
+/// Metres of a kerb's cut that may lie off the line: a kerb the detector drew a few metres past
+/// a corner, and a view that turns the corner, left that overshoot joined behind the view's end,
+/// a fold that every later view along the new side drew longer (sim:val:12: 143 m on
+/// `sim-10016-7`; docs/mapping.md); a kerb that goes on elsewhere is longer.
+pub const KERB_SLACK: f64 = 8.0;
 
 /// Metres: a stored point beside an observation nearer than this to one of its ends is not
 /// beside its interior (there the two lines part).
@@ -142,11 +163,11 @@ impl<'a> Unfold<'a> {
     /// Of the stored line `points` (arc lengths `arc` along it), which are kept when it ends
     /// where it first comes back beside the observation: after `s_end`, every point from the
     /// first one beside it on is dropped; before `s_start`, every point up to the last one. All
-    /// are kept when the observation does not run along the line. With a bounded [`Fold`] a side
-    /// is cut only when all that its cut drops lies back on the line (within twice the gap of the
-    /// observation or of the stored points kept before it): a fold. Where the stored line goes on
-    /// elsewhere after meeting the view (a kerb that a view rounding a corner meets twice), that
-    /// side is kept whole.
+    /// are kept when the observation does not run along the line. A side is cut only when at most
+    /// the fold's slack of what its cut drops lies off the line (farther than twice the gap from
+    /// the observation and from the stored points kept before it): a fold, or a fold and a short
+    /// overshoot. Where the stored line goes on elsewhere after meeting the view (a kerb that a
+    /// view rounding a corner meets twice), that side is kept whole.
     pub fn trim(&self, points: &[Point], arc: &[f64], s_start: f64, s_end: f64) -> Vec<bool> {
         let n = points.len();
         if !self.along(s_end - s_start) || n == 0 {
@@ -156,17 +177,29 @@ impl<'a> Unfold<'a> {
         // whether stored point i lies back on the line: near the view or the stored `part`
         let on_line = |i: usize, part: &[Point]| {
             let near = 2.0 * self.fold.gap;
-            !self.fold.bounded
-                || project_onto_polyline(&points[i], self.q).0 <= near
+            project_onto_polyline(&points[i], self.q).0 <= near
                 || (!part.is_empty() && project_onto_polyline(&points[i], part).0 <= near)
+        };
+        // whether the cut of the points `cut` (a run) drops at most the slack off the line: the
+        // length of its segments with an end off it
+        let within_slack = |cut: std::ops::Range<usize>, part: &[Point]| {
+            if self.fold.slack == f64::INFINITY {
+                return true;
+            }
+            let off: Vec<bool> = cut.clone().map(|i| !on_line(i, part)).collect();
+            let dropped: f64 = (cut.start..cut.end.saturating_sub(1))
+                .filter(|&i| off[i - cut.start] || off[i + 1 - cut.start])
+                .map(|i| (points[i + 1] - points[i]).norm())
+                .sum();
+            !off.iter().any(|&o| o) || dropped <= self.fold.slack
         };
         let first_after = (0..n)
             .find(|&i| arc[i] > s_end && beside[i])
-            .filter(|&f| (f..n).all(|i| on_line(i, &points[..f])));
+            .filter(|&f| within_slack(f..n, &points[..f]));
         let last_before = (0..n)
             .rev()
             .find(|&i| arc[i] <= s_start && beside[i])
-            .filter(|&l| (0..=l).all(|i| on_line(i, &points[l + 1..])));
+            .filter(|&l| within_slack(0..l + 1, &points[l + 1..]));
         (0..n)
             .map(|i| !(first_after.is_some_and(|f| i >= f) || last_before.is_some_and(|l| i <= l)))
             .collect()
@@ -188,7 +221,7 @@ pub fn splice_line(
     overlap: f64,
     fold: Fold,
 ) -> Result<Vec<Point>> {
-    check_non_negative("gap", fold.gap)?;
+    fold.check()?;
     splice(stored, new, overlap, Some(fold))
 }
 
@@ -239,11 +272,11 @@ mod tests {
 
     const LANE: Fold = Fold {
         gap: LANE_FOLD,
-        bounded: false,
+        slack: f64::INFINITY,
     };
     const KERB: Fold = Fold {
         gap: KERB_FOLD,
-        bounded: true,
+        slack: KERB_SLACK,
     };
 
     fn pts(v: &[(f64, f64)]) -> Vec<Point> {
@@ -394,6 +427,43 @@ mod tests {
         ]);
         let out = splice_line(&onward, &view, 0.5, KERB).unwrap();
         assert_eq!(out[out.len() - 1], Point::new(14.0, -60.0));
+        assert!(splice_line(
+            &folded,
+            &view,
+            0.5,
+            Fold {
+                slack: f64::NAN,
+                ..KERB
+            }
+        )
+        .is_err());
+    }
+
+    #[test]
+    fn a_kerb_drawn_past_a_corner_is_cut_where_a_view_turns_it() {
+        // the kerb was drawn 6 m past the corner at x = 20; the view turns the corner north
+        let stored = pts(&[
+            (0.0, 0.0),
+            (10.0, 0.0),
+            (20.0, 0.0),
+            (20.8, 0.0),
+            (23.0, 0.0),
+            (26.0, 0.0),
+        ]);
+        let view = pts(&[
+            (4.0, 0.1),
+            (12.0, 0.1),
+            (20.2, 0.2),
+            (20.4, 5.0),
+            (20.4, 15.0),
+        ]);
+        let out = splice_line(&stored, &view, 0.5, KERB).unwrap();
+        assert_eq!(out[out.len() - 1], Point::new(20.4, 15.0)); // ends where the view does
+        assert!(out.iter().all(|p| p.x <= 20.4));
+        // with no slack the overshoot stays, joined behind the view's end: a fold
+        let strict = Fold { slack: 0.0, ..KERB };
+        let out = splice_line(&stored, &view, 0.5, strict).unwrap();
+        assert_eq!(out[out.len() - 1], Point::new(26.0, 0.0));
     }
 
     #[test]

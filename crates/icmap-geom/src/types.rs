@@ -61,19 +61,20 @@ impl MapClass {
     /// splices lines by the rules that cut the stored line where it comes back beside a new view
     /// ([`crate::splice::Unfold`]). Lane lines within [`crate::splice::LANE_FOLD`] (neighbouring
     /// lanes lie further apart), unbounded; kerbs within [`crate::splice::KERB_FOLD`] (a kerb
-    /// around a median island comes back further away), bounded to what lies back on the line;
+    /// around a median island comes back further away), bounded to what lies back on the line
+    /// but [`crate::splice::KERB_SLACK`];
     /// `None` for crossings.
     pub const fn fold(self) -> Option<crate::splice::Fold> {
-        use crate::splice::{Fold, KERB_FOLD, LANE_FOLD};
+        use crate::splice::{Fold, KERB_FOLD, KERB_SLACK, LANE_FOLD};
         match self {
             MapClass::PedCrossing => None,
             MapClass::Divider => Some(Fold {
                 gap: LANE_FOLD,
-                bounded: false,
+                slack: f64::INFINITY,
             }),
             MapClass::Boundary => Some(Fold {
                 gap: KERB_FOLD,
-                bounded: true,
+                slack: KERB_SLACK,
             }),
         }
     }
