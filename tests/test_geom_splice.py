@@ -161,6 +161,25 @@ def test_a_line_does_not_fold_onto_itself() -> None:
         assert divider[:, 1].min() > -1.3, merge  # a lane line 1.4 m beside itself is a fold
 
 
+def _two_kerbs_one_view(
+    a: np.ndarray, b: np.ndarray, view: np.ndarray
+) -> list[tuple[str, tuple[np.ndarray, np.ndarray]]]:
+    """Kerbs ``a`` and ``b`` stored, then ``view`` spliced into each, and merged by curve fit into
+    each in a fresh map: [(how, (a after, b after))] for "splice" and "merge"."""
+    out = []
+    for merge in ("splice", "merge"):
+        m = GlobalMap(0.5, 0.5)
+        m.insert_with_id(1, 2, a, frame=0)
+        m.insert_with_id(2, 2, b, frame=0)
+        for i in (1, 2):
+            if merge == "splice":
+                m.splice(i, view, 0.5, frame=1)
+            else:
+                m.merge(i, view, frame=1)
+        out.append((merge, (m.get(1)[1], m.get(2)[1])))
+    return out
+
+
 def test_a_fold_cut_is_bounded() -> None:
     """A kerb that comes back beside a view and then goes on far from it (sim:test:4,
     sim-10158-2: a view rounding a corner met a long kerb twice, and the unbounded cut dropped
@@ -169,17 +188,9 @@ def test_a_fold_cut_is_bounded() -> None:
     onward = np.array([[0.0, 0.0], [20.0, 0.0], [20.4, -0.4], [14.0, -0.8], [14.0, -60.0]])
     folded = np.array([[0.0, 0.0], [20.0, 0.0], [20.4, -0.4], [14.0, -0.8], [6.0, -0.8]])
     view = np.array([[4.0, 0.0], [16.0, 0.0]])
-    for merge in ("splice", "merge"):
-        m = GlobalMap(0.5, 0.5)
-        m.insert_with_id(1, 2, onward, frame=0)
-        m.insert_with_id(2, 2, folded, frame=0)
-        for i in (1, 2):
-            if merge == "splice":
-                m.splice(i, view, 0.5, frame=1)
-            else:
-                m.merge(i, view, frame=1)
-        assert m.get(1)[1][:, 1].min() < -59.0, merge  # the kerb going on is kept
-        back = m.get(2)[1]
+    for merge, (kept, cut) in _two_kerbs_one_view(onward, folded, view):
+        assert kept[:, 1].min() < -59.0, merge  # the kerb going on is kept
+        back = cut
         back = back[back[:, 1] < -0.3]  # the hook's points, off the view's line
         assert back[:, 0].min() > 14.0, merge  # the fold back along the view is cut
 
@@ -192,15 +203,6 @@ def test_a_kerb_drawn_past_a_corner_loses_the_overshoot() -> None:
     stored = np.array([[0.0, 0.0], [10.0, 0.0], [20.0, 0.0], [20.8, 0.0], [23.0, 0.0], [26.0, 0.0]])
     view = np.array([[4.0, 0.1], [12.0, 0.1], [20.2, 0.2], [20.4, 5.0], [20.4, 15.0]])
     longer = np.vstack([stored, [[40.0, 0.0]]])  # 20 m past the corner: a kerb going on
-    for merge in ("splice", "merge"):
-        m = GlobalMap(0.5, 0.5)
-        m.insert_with_id(1, 2, stored, frame=0)
-        m.insert_with_id(2, 2, longer, frame=0)
-        for i in (1, 2):
-            if merge == "splice":
-                m.splice(i, view, 0.5, frame=1)
-            else:
-                m.merge(i, view, frame=1)
-        kerb = m.get(1)[1]
+    for merge, (kerb, kept) in _two_kerbs_one_view(stored, longer, view):
         assert kerb[:, 0].max() < 21.0 and kerb[-1, 1] > 14.0, merge  # ends where the view does
-        assert m.get(2)[1][:, 0].max() > 39.0, merge  # the kerb going on is kept
+        assert kept[:, 0].max() > 39.0, merge  # the kerb going on is kept
