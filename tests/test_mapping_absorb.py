@@ -222,6 +222,19 @@ def test_the_mapper_keeps_stubs_across_lanes_out(still: Sequence, drop: bool) ->
     assert m.stats.stubs == 0  # kept out at insertion, not removed later
 
 
+def test_a_removed_stub_takes_its_aliases_along() -> None:
+    """A track aliased into a stub that ``drop_stubs`` removes maps into its own id again."""
+    m = Mapper(Scripted({}), config=MapperConfig())
+    m.reset()
+    gm = m.global_map
+    lane = gm.insert(1, line(0, 60, 0).astype(np.float64))
+    stub = gm.insert(1, np.array([[20.0, -4.0], [20.0, 4.0]]))  # 8 m across: not absorbed
+    m._alias.update({77: stub, 78: lane})
+    m._absorb([lane])
+    assert stub not in gm and m.stats.stubs == 1
+    assert m._alias == {78: lane}
+
+
 def test_a_confident_first_sighting_enters_the_map_at_once(still: Sequence) -> None:
     """``confirm_score``: with ``min_hits`` 2 a divider seen in one frame only enters the map when
     its score reaches ``confirm_score``; a weaker one stays tentative (kept out)."""

@@ -27,6 +27,8 @@ Per frame (paper Fig. 2):
    same-class neighbour it lies on over most of its length become one (``GlobalMap.absorb``); the
    tracks of the absorbed instance map into the kept one. Pieces of one line that the tracker
    kept apart (a skeleton piece, a track found again beside its instance) stop doubling the map.
+   Then lane lines do not cross (``drop_stubs``, an extension): a stub across the lanes among
+   the dividers the step touched and their neighbours is removed (``map_nms.drop_stubs``).
 
 This module is the pipeline and the state it carries; each step's logic has its own module:
 ``associate`` (scores; the assignment is ``tracker``'s), ``reid``, ``fuse``, ``merge`` (with the
@@ -387,12 +389,18 @@ class Mapper:
 
     def _absorb(self, touched: list[int]) -> None:
         """Instances this step inserted or merged into absorb the same-class neighbours they lie
-        on, or are absorbed by them (``mapping.absorb``); aliases follow."""
+        on, or are absorbed by them (``mapping.absorb``); aliases follow. Then, with
+        ``drop_stubs``, the stubs across lanes among them and their neighbours go; a track aliased
+        into one maps into its own id again (it re-enters the map only with a view along the
+        lanes)."""
         cfg = self.config
         self.stats.absorbed += absorb_touched(self._map, self.crossings, self._alias, cfg, touched)
         if cfg.drop_stubs:  # lane lines do not cross (mapping.map_nms)
             touched = [i for i in touched if i in self._map]
-            self.stats.stubs += len(drop_stubs(self._map, touched, cfg.stub_length, cfg.stub_angle))
+            gone = set(drop_stubs(self._map, touched, cfg.stub_length, cfg.stub_angle))
+            for track in [t for t, target in self._alias.items() if target in gone]:
+                del self._alias[track]
+            self.stats.stubs += len(gone)
 
 
 def _select(d: Detections, keep: NDArray[np.bool_]) -> Detections:

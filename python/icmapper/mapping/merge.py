@@ -12,7 +12,9 @@ into the global map by the rule for what it is.
 - a new instance: inserted once its track has been seen in ``min_hits`` frames, or at once when
   its detection scores at least ``confirm_score`` (a confident first sighting is not held back:
   an instance in range in a single keyframe would never enter the map) and, for a crossing, the
-  view is more than a sliver at the range edge (``CrossingMerger.confirmable``).
+  view is more than a sliver at the range edge (``CrossingMerger.confirmable``); with
+  ``drop_stubs`` a lane-line stub across a longer stored line is not inserted
+  (``map_nms.is_stub``).
 
 Rejected geometry is reported to ``on_failure`` and skipped. The map, the crossing rule and the
 tracker's points change in place; the caller owns them. No I/O.
