@@ -206,3 +206,23 @@ def test_a_kerb_drawn_past_a_corner_loses_the_overshoot() -> None:
     for merge, (kerb, kept) in _two_kerbs_one_view(stored, longer, view):
         assert kerb[:, 0].max() < 21.0 and kerb[-1, 1] > 14.0, merge  # ends where the view does
         assert kept[:, 0].max() > 39.0, merge  # the kerb going on is kept
+
+
+def test_a_view_across_the_seam_of_a_loop_keeps_the_loop() -> None:
+    """A kerb around a block whose end has come back to its start, and a view around the corner
+    where the two meet: spliced or merged whole, the view replaced the stretch between its ends'
+    projections, the whole loop (sim:val:32, sim-10082-27: 360 m cut to 38 m in one frame).
+    The store's line rules merge each piece of the view into its own stretch."""
+    ring = np.array([[0.0, 2.0], [0.0, 20.0], [40.0, 20.0], [40.0, 0.0], [2.0, 0.0]])
+    view = np.array([[6.0, 0.1], [3.0, 0.1], [0.1, 0.1], [0.1, 3.0], [0.1, 6.0]])
+    for merge in ("splice", "merge"):
+        m = GlobalMap(0.5, 0.5)
+        m.insert_with_id(1, 2, ring, frame=0)
+        if merge == "splice":
+            m.splice(1, view, 0.5, frame=1)
+        else:
+            m.merge(1, view, frame=1)
+        kerb = m.get(1)[1]
+        length = float(np.linalg.norm(np.diff(kerb, axis=0), axis=1).sum())
+        assert length > 100.0, (merge, length)  # 114 m of kerb stay
+        assert np.abs(kerb[:, 1] - 20.0).min() < 0.3, merge  # the far side is kept

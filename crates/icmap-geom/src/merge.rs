@@ -11,7 +11,7 @@
 
 use crate::error::{GeomError, Result};
 use crate::fit::fit_curve;
-use crate::splice::{Fold, Unfold};
+use crate::splice::{seam_runs, Fold, Unfold};
 
 /// The smoothing fit of the spliced points; where FITPACK's system is singular for this input
 /// (a zig-zag detection can make the smoothing spline leave the data), the spliced polyline itself
@@ -307,6 +307,19 @@ fn merge_open(
     if gcum[gcum.len() - 1] <= DEDUP_EPS {
         return fit_or_polyline(&d, s, spacing);
     }
+    if let Some(runs) = unfold.filter(|f| f.loops).and_then(|_| seam_runs(&g, &d)) {
+        // a detection across a seam of the line (its end come back to its start): each piece
+        // merges into its own stretch, in order
+        let mut out = g.into_owned();
+        for run in &runs {
+            match merge_open(&out, run, s, spacing, unfold) {
+                Ok(merged) => out = merged,
+                Err(GeomError::Degenerate { .. }) => {} // a piece of coinciding points
+                Err(e) => return Err(e),
+            }
+        }
+        return Ok(out);
+    }
     let mut projector = Projector::new(&g, &gcum);
     let proj: Vec<(f64, Vector2<f64>)> = d.iter().map(|p| projector.project(p)).collect();
     // Orientation of the detection relative to the global polyline: each detected segment
@@ -426,6 +439,7 @@ mod tests {
     const LANE: Fold = Fold {
         gap: crate::splice::LANE_FOLD,
         slack: f64::INFINITY,
+        loops: false,
     };
     use crate::test_util::p;
     use proptest::prelude::*;

@@ -11,6 +11,11 @@
 //! 3. the result is the stored points before the projection of `new`'s start onto `stored`, then
 //!    `new`, then the stored points after the projection of its end (arc lengths along `stored`).
 //!
+//! With the store's rule for kerbs ([`splice_line`], [`Fold::loops`]) a new observation that
+//! spans a seam of the stored line (its end come back to its start, a kerb around a block) is
+//! spliced piece by piece ([`seam_runs`]); [`splice_polyline`], the VMA and PolyMerge rule, keeps
+//! the plain algorithm.
+//!
 //! A line does not fold onto itself ([`splice_line`], the store's rule for lane lines and kerbs):
 //! there the kept stored points on either side end where the stored line comes back beside `new`
 //! ([`Unfold`]), by the class's [`Fold`] ([`crate::types::MapClass::fold`]).
@@ -41,6 +46,39 @@ pub fn project_onto_polyline(p: &Point, poly: &[Point]) -> (f64, f64) {
         s0 += seg_len;
     }
     (best_d, best_s)
+}
+
+/// Metres: consecutive points of a new observation whose projections onto the stored line lie
+/// this much farther apart along it than the two points lie apart are on two stretches of it
+/// that meet only across a seam: a kerb around a block whose end has come back to its start.
+/// Spliced or merged whole, the observation replaced the stretch between its ends' projections,
+/// the whole loop (sim:val:32, `sim-10082-27`: a kerb of 360 m cut to 38 m in one frame).
+pub const SEAM_GAP: f64 = 10.0;
+
+/// The pieces of `new` between its seams on `stored` ([`SEAM_GAP`]), each of at least 2 points
+/// (a lone point between two seams is dropped); `None` when it has no seam.
+pub fn seam_runs(stored: &[Point], new: &[Point]) -> Option<Vec<Vec<Point>>> {
+    let s: Vec<f64> = new
+        .iter()
+        .map(|p| project_onto_polyline(p, stored).1)
+        .collect();
+    let cuts: Vec<usize> = (1..new.len())
+        .filter(|&i| (s[i] - s[i - 1]).abs() > (new[i] - new[i - 1]).norm() + SEAM_GAP)
+        .collect();
+    if cuts.is_empty() {
+        return None;
+    }
+    let bounds: Vec<usize> = std::iter::once(0)
+        .chain(cuts)
+        .chain(std::iter::once(new.len()))
+        .collect();
+    Some(
+        bounds
+            .windows(2)
+            .filter(|w| w[1] - w[0] >= 2)
+            .map(|w| new[w[0]..w[1]].to_vec())
+            .collect(),
+    )
 }
 
 /// `new` in the direction of `stored`: reversed when its end projects before its start along
@@ -94,6 +132,11 @@ pub struct Fold {
     /// the unbounded cut of the sixteenth round: bounded, more of their folds stayed (validation
     /// drives: divider GAP 77.1 -> 75.0).
     pub slack: f64,
+    /// Whether the line may close around a block (kerbs): a view across the seam where its end
+    /// has come back to its start is merged piece by piece ([`seam_runs`]). Lane lines do not
+    /// loop; cut there too, their views lost on the synthetic test drives (sim:test:12 CD_div
+    /// 0.979 -> 1.012 m, docs/mapping.md).
+    pub loops: bool,
 }
 
 impl Fold {
@@ -234,6 +277,17 @@ fn splice(
     validate_points(stored, 2, "stored polyline")?;
     validate_points(new, 2, "new polyline")?;
     check_non_negative("overlap", overlap)?;
+    if let Some(runs) = unfold
+        .filter(|f| f.loops)
+        .and_then(|_| seam_runs(stored, new))
+    {
+        // each piece on its own stretch, in order
+        let mut out = stored.to_vec();
+        for run in &runs {
+            out = splice(&out, run, overlap, unfold)?;
+        }
+        return Ok(out);
+    }
     let q = orient_like(stored, new);
     let (_, s_start) = project_onto_polyline(&q[0], stored);
     let (_, s_end) = project_onto_polyline(&q[q.len() - 1], stored);
@@ -273,10 +327,12 @@ mod tests {
     const LANE: Fold = Fold {
         gap: LANE_FOLD,
         slack: f64::INFINITY,
+        loops: false,
     };
     const KERB: Fold = Fold {
         gap: KERB_FOLD,
         slack: KERB_SLACK,
+        loops: true,
     };
 
     fn pts(v: &[(f64, f64)]) -> Vec<Point> {
@@ -437,6 +493,33 @@ mod tests {
             }
         )
         .is_err());
+    }
+
+    #[test]
+    fn a_view_across_the_seam_of_a_loop_is_spliced_piece_by_piece() {
+        // a kerb around a 40 x 20 m block, drawn from (0, 2) round to (2, 0): its end has come
+        // back to its start; a view around the corner (0, 0) spans the seam
+        let ring = pts(&[
+            (0.0, 2.0),
+            (0.0, 20.0),
+            (40.0, 20.0),
+            (40.0, 0.0),
+            (2.0, 0.0),
+        ]);
+        let view = pts(&[(6.0, 0.1), (3.0, 0.1), (0.1, 0.1), (0.1, 3.0), (0.1, 6.0)]);
+        let runs = seam_runs(&ring, &view).unwrap();
+        assert_eq!(runs.len(), 2);
+        assert!(seam_runs(&ring, &pts(&[(0.1, 4.0), (0.1, 9.0)])).is_none());
+        let out = splice_line(&ring, &view, 0.5, KERB).unwrap();
+        let len = polyline_length(&out, false);
+        assert!(len > 100.0, "the loop was cut to {len} m"); // 114 m of kerb stay
+        assert!(out.iter().any(|p| (p.y - 20.0).abs() < 1e-9)); // the far side is kept
+                                                                // the plain algorithm (VMA, PolyMerge) and a lane line's rule replace the stretch between
+                                                                // the ends' projections
+        let plain = splice_polyline(&ring, &view, 0.5).unwrap();
+        assert!(polyline_length(&plain, false) < 20.0);
+        let lane = splice_line(&ring, &view, 0.5, LANE).unwrap();
+        assert!(polyline_length(&lane, false) < 20.0);
     }
 
     #[test]

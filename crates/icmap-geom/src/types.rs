@@ -62,7 +62,7 @@ impl MapClass {
     /// ([`crate::splice::Unfold`]). Lane lines within [`crate::splice::LANE_FOLD`] (neighbouring
     /// lanes lie further apart), unbounded; kerbs within [`crate::splice::KERB_FOLD`] (a kerb
     /// around a median island comes back further away), bounded to what lies back on the line
-    /// but [`crate::splice::KERB_SLACK`];
+    /// but [`crate::splice::KERB_SLACK`], and may close around a block;
     /// `None` for crossings.
     pub const fn fold(self) -> Option<crate::splice::Fold> {
         use crate::splice::{Fold, KERB_FOLD, KERB_SLACK, LANE_FOLD};
@@ -71,10 +71,12 @@ impl MapClass {
             MapClass::Divider => Some(Fold {
                 gap: LANE_FOLD,
                 slack: f64::INFINITY,
+                loops: false,
             }),
             MapClass::Boundary => Some(Fold {
                 gap: KERB_FOLD,
                 slack: KERB_SLACK,
+                loops: true,
             }),
         }
     }
