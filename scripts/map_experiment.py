@@ -186,12 +186,21 @@ def main(argv: list[str] | None = None) -> int:
         help="class indices (e.g. 1,2) whose lines move to the probabilities' sub-cell maximum "
         "across them after vectorising (subcell_lines; an experiment, every method)",
     )
+    ap.add_argument(
+        "--stop",
+        type=int,
+        default=0,
+        help="what-if: each drive stops for this many frames halfway (its middle frame held: "
+        "the same pose and images; synthetic drives never stop; 'MapperConfig.min_travel')",
+    )
     a = ap.parse_args(argv)
 
     vec = replace(VectoriseParams(), **_parse_sets(a.vec, VectoriseParams))
     from icmapper.models.network import checkpoint_settings
 
     seqs = open_source(a.source, image_size=checkpoint_settings(a.checkpoint)[1])
+    if a.stop:
+        seqs = [with_stop(s, a.stop) for s in seqs]
     weights = hashlib.sha1(Path(a.checkpoint).read_bytes()).hexdigest()
     key = hashlib.sha1(f"{weights}|{a.source}".encode()).hexdigest()[:10]
     cache = Path(a.cache) / key
@@ -284,6 +293,26 @@ def main(argv: list[str] | None = None) -> int:
     if a.json:
         Path(a.json).write_text(json.dumps(out, indent=1, default=float))
     return 0
+
+
+def with_stop(seq: Any, frames: int) -> Any:
+    """``seq`` with its middle frame held for ``frames`` more frames (its pose and images
+    repeated; timestamps every 0.5 s), named "<name>-stop<frames>"."""
+    k = len(seq) // 2
+    idx = np.r_[np.arange(k + 1), np.full(frames, k), np.arange(k + 1, len(seq))]  # (T + frames,)
+    render = seq.render
+
+    def held(i: int) -> Any:
+        return render(int(idx[i]))
+
+    return replace(
+        seq,
+        name=f"{seq.name}-stop{frames}",
+        timestamps=np.arange(len(idx)) * 0.5,
+        poses=np.asarray(seq.poses)[idx],
+        render=held if render is not None else None,
+        frame_rigs=[seq.frame_rigs[j] for j in idx] if seq.frame_rigs is not None else None,
+    )
 
 
 def cd_directions(maps: list, ggts: list) -> dict[str, list[float]]:

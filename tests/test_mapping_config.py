@@ -182,9 +182,15 @@ def test_reid_alias_setting(alias: bool) -> None:
 
     # frame 0: a divider 0..20 m; frame 1: the same divider, and a short piece lying on its end
     script = [dets(line(0, 20, 2.0)), dets(line(0, 20, 2.0), line(14, 20, 2.1))]
-    # (absorption off: it would join the piece to the divider either way)
+    # (absorption off: it would join the piece to the divider either way; min_travel off: both
+    # frames are taken at one pose)
     cfg = MapperConfig(
-        min_hits=1, reid_alias=alias, detect_threshold=0.0, track_threshold=0.0, absorb=False
+        min_hits=1,
+        reid_alias=alias,
+        detect_threshold=0.0,
+        track_threshold=0.0,
+        absorb=False,
+        min_travel=0.0,
     )
     m = Mapper(_Scripted(script), config=cfg)
     rig = nuscenes_rig((32, 88))

@@ -15,7 +15,7 @@ from icmapper.data.sources import open_source
 from icmapper.data.types import Sequence
 from icmapper.mapping.config import MapperConfig
 from icmapper.mapping.mapper import Mapper
-from icmapper.mapping.state import STATE_VERSION, state_path
+from icmapper.mapping.state import STAT_COUNTS, STATE_VERSION, state_path
 from icmapper.mapping.types import StepResult
 
 REPO = Path(__file__).resolve().parents[1]
@@ -53,7 +53,8 @@ def assert_same_state(a: Mapper, b: Mapper) -> None:
     assert all(x.points.tobytes() == y.points.tobytes() for x, y in zip(ta, tb, strict=True))
     assert a._alias == b._alias and a._untracked == b._untracked
     assert a.crossings.counts == b.crossings.counts
-    for n in ("frames", "inserted", "merged", "reidentified", "aliased", "merge_failures"):
+    assert a.merge_pose == b.merge_pose
+    for n in STAT_COUNTS:
         assert getattr(a.stats, n) == getattr(b.stats, n), n
 
 
@@ -187,6 +188,9 @@ def test_corrupt_sidecar_refused(tmp_path: Path, sim_seq: Sequence) -> None:
         ("track_points", arrays["track_points"][:1]),
         ("map_sha256", np.array("0" * 64)),
         ("track_ids", arrays["track_ids"].astype(np.float64)),
+        ("merge_pose", np.array([1.0, np.nan, 0.0])),
+        ("merge_pose", np.array([1.0, 2.0])),
+        ("merge_pose", np.array([1, 2, 3], np.int64)),
     ):
         bad = dict(arrays, **{key: val})
         with sidecar.open("wb") as fh:

@@ -123,6 +123,13 @@ class MapperConfig:
         "enter later with a view along the lanes), and such a stub among the dividers a step "
         "touched and their neighbours is removed (mapping.map_nms.drop_stubs)",
     )
+    min_travel: float = _f(
+        0.5,
+        "metres; a frame whose ego moved less than this (and turned less than "
+        "mapping.mapper.STILL_TURN degrees) since the last frame that merged merges nothing: a "
+        "stopped car sees one view again and again, and its errors would pile into the map (its "
+        "detections are still tracked, fused and reported; 0: every frame merges)",
+    )
     splice_overlap: float = _f(0.5, "metres within which a spliced fused polyline replaces points")
     fused_clip: bool = _f(
         False,
@@ -171,6 +178,10 @@ class MapperConfig:
                      "merge_behind", "stub_length"):  # fmt: skip
             if not getattr(self, name) >= 0:
                 raise ValueError(f"MapperConfig.{name} must be >= 0, got {getattr(self, name)}")
+        if not 0.0 <= self.min_travel < float("inf"):
+            raise ValueError(
+                f"MapperConfig.min_travel must be finite and >= 0, got {self.min_travel}"
+            )
         if self.fused_merge not in FUSED_MERGES:
             raise ValueError(
                 f"MapperConfig.fused_merge must be one of {FUSED_MERGES}, got {self.fused_merge!r}"

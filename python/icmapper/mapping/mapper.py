@@ -30,6 +30,12 @@ Per frame (paper Fig. 2):
    Then lane lines do not cross (``drop_stubs``, an extension): a stub across the lanes among
    the dividers the step touched and their neighbours is removed (``map_nms.drop_stubs``).
 
+Steps 6 and 7 are left out while the ego stands still (``min_travel``, an extension): a frame
+whose pose lies within ``min_travel`` metres and ``STILL_TURN`` degrees of the last frame that
+merged merges nothing (a car stopped at a light sees one view again and again, and merging it
+every frame piles that view's errors into the map); its detections are still tracked, fused and
+reported.
+
 This module is the pipeline and the state it carries; each step's logic has its own module:
 ``associate`` (scores; the assignment is ``tracker``'s), ``reid``, ``fuse``, ``merge`` (with the
 rules in ``crossings``, ``passed``, ``splice``) and ``absorb``; the counters are in ``stats``, the
@@ -67,6 +73,9 @@ from icmapper.mapping.stats import NETWORK_STAGES, STAGES, UNTRACKED_ID_BASE, Ma
 from icmapper.mapping.tracker import Tracker
 from icmapper.mapping.types import Detections, DetectionSource, StepResult
 from icmapper.mapping.variants import VARIANTS, Variant, network_settings
+
+#: Degrees the ego must turn, below ``min_travel`` of travel, for a frame to merge.
+STILL_TURN = 5.0
 
 if TYPE_CHECKING:
     import torch
@@ -114,6 +123,7 @@ class Mapper:
         self.stats = MapperStats()
         self._untracked = UNTRACKED_ID_BASE
         self._alias: dict[int, int] = {}  # track id -> global instance id it maps into
+        self._merge_pose: tuple[float, float, float] | None = None  # x, y, yaw of the last merge
 
     # ------------------------------------------------------------------ construction
     @classmethod
@@ -189,6 +199,11 @@ class Mapper:
         return dict(self._alias)
 
     @property
+    def merge_pose(self) -> tuple[float, float, float] | None:
+        """The ego's (x, y, yaw) world pose at the last frame that merged (None: none yet)."""
+        return self._merge_pose
+
+    @property
     def untracked_next(self) -> int:
         """The id the next reported but untracked detection gets."""
         return self._untracked
@@ -201,6 +216,7 @@ class Mapper:
         self.stats = MapperStats()
         self._untracked = UNTRACKED_ID_BASE
         self._alias = {}
+        self._merge_pose = None
 
     def restore(
         self,
@@ -210,13 +226,16 @@ class Mapper:
         untracked: int | None = None,
         stats: MapperStats | None = None,
         crossing_counts: dict[int, int] | None = None,
+        merge_pose: tuple[float, float, float] | None = None,
     ) -> None:
-        """Replaces the map, the aliases, the crossing rule's view counts (none given: none) and
-        (when given) the untracked-id counter and the stats: used by ``mapping.state.resume``,
-        which restores the tracker and the source itself."""
+        """Replaces the map, the aliases, the crossing rule's view counts (none given: none),
+        the pose of the last merge (none: the next frame merges) and (when given) the
+        untracked-id counter and the stats: used by ``mapping.state.resume``, which restores the
+        tracker and the source itself."""
         self.crossings.reset(crossing_counts)
         self._map = global_map
         self._alias = dict(alias)
+        self._merge_pose = merge_pose
         if untracked is not None:
             self._untracked = int(untracked)
         if stats is not None:
@@ -268,8 +287,14 @@ class Mapper:
         t4 = time.perf_counter()
         sec["fusion"] += t4 - t3
 
-        inserted, merged = self._merge(det, track_ids, fused, was_fused, pose, frame.index)
-        self._absorb(inserted + merged)
+        inserted: list[int] = []
+        merged: list[int] = []
+        if self._stands_still(xyyaw):
+            self.stats.still += 1
+        else:
+            inserted, merged = self._merge(det, track_ids, fused, was_fused, pose, frame.index)
+            self._absorb(inserted + merged)
+            self._merge_pose = xyyaw
         sec["merge"] += time.perf_counter() - t4
 
         all_ids = np.empty(len(dets), np.int64)
@@ -281,6 +306,16 @@ class Mapper:
         points[tracked] = fused
         self.stats.frames += 1
         return StepResult(frame.index, dets, all_ids, points, inserted, merged)
+
+    def _stands_still(self, xyyaw: tuple[float, float, float]) -> bool:
+        """Whether the ego (x, y, yaw) lies within ``min_travel`` metres and ``STILL_TURN``
+        degrees of the last frame that merged (``min_travel`` 0 or no merge yet: False)."""
+        last = self._merge_pose
+        if last is None or self.config.min_travel <= 0:
+            return False
+        moved = float(np.hypot(xyyaw[0] - last[0], xyyaw[1] - last[1]))
+        turned = abs((xyyaw[2] - last[2] + np.pi) % (2 * np.pi) - np.pi)
+        return moved < self.config.min_travel and turned < np.radians(STILL_TURN)
 
     def _associate(self, det: Detections, pose: NDArray[np.float64]) -> NDArray[np.int64]:
         """Track ids (k,) of the detections: scores against the buffer (``mapping.associate``),

@@ -3,10 +3,10 @@
 ``save_state(mapper, path)`` writes the native global map file ``path`` and the sidecar
 ``<path>.state.npz`` (plain numpy arrays, no pickle, format ``STATE_VERSION``): the tracking buffer
 (ids, classes, world points, queries, ages, hits), the next track id, the track aliases, the
-crossing rule's complete-view counts (``mapping.crossings``), the untracked id counter, the
-stats, the SHA-256 of the map file (ties the pair together) and the
-detection source's memory when it has one (``state_dict()``, e.g. ``NetworkDetector``). Both files
-are written atomically.
+crossing rule's complete-view counts (``mapping.crossings``), the pose of the last merge
+(``MapperConfig.min_travel``), the untracked id counter, the stats, the SHA-256 of the map file
+(ties the pair together) and the detection source's memory when it has one (``state_dict()``,
+e.g. ``NetworkDetector``). Both files are written atomically.
 
 ``resume(mapper, path)`` restores all of it, so the continuation is identical to the
 uninterrupted run; without a sidecar it loads the map only (see ``resume``).
@@ -32,16 +32,19 @@ if TYPE_CHECKING:  # the mapper imports this module; it is the one edge between 
     from icmapper.mapping.mapper import Mapper
 
 #: Format version of the sidecar (``<map>.state.npz``).
-STATE_VERSION = 3  # 2: the crossing rule's view counts; 3: the absorbed counter
+STATE_VERSION = 4  # 2: the crossing rule's view counts; 3: the absorbed counter; 4: the pose
+# of the last merge (``min_travel``) and the split / stubs / still counters
 #: Integer counters of ``MapperStats`` stored in the sidecar, in order.
 STAT_COUNTS = (
-    "frames", "inserted", "merged", "reidentified", "aliased", "absorbed", "merge_failures"
+    "frames", "inserted", "merged", "reidentified", "aliased", "split", "absorbed", "stubs",
+    "still", "merge_failures"
 )  # fmt: skip
 #: Arrays every sidecar holds (besides ``source.*``, the detection source's state).
 _STATE_KEYS = (
     "version", "map_sha256", "source_kind", "next_id", "untracked", "stats_counts",
-    "stats_seconds", "stats_failures", "alias", "crossing_counts", "track_ids", "track_cls",
-    "track_age", "track_hits", "track_counts", "track_points", "track_has_query", "track_queries",
+    "stats_seconds", "stats_failures", "alias", "crossing_counts", "merge_pose", "track_ids",
+    "track_cls", "track_age", "track_hits", "track_counts", "track_points", "track_has_query",
+    "track_queries",
 )  # fmt: skip
 
 
@@ -115,6 +118,7 @@ def resume(mapper: Mapper, path: str | Path) -> None:
         untracked=restore["untracked"],
         stats=restore["stats"],
         crossing_counts=restore["crossing_counts"],
+        merge_pose=restore["merge_pose"],
     )
 
 
@@ -145,6 +149,7 @@ def _state_arrays(mapper: Mapper) -> dict[str, NDArray[Any]]:
         "crossing_counts": np.array(sorted(mapper.crossings.counts.items()), np.int64).reshape(
             -1, 2
         ),  # (c, 2): instance id, complete views
+        "merge_pose": np.array(mapper.merge_pose or (), np.float64),  # (3,) x, y, yaw or (0,)
         "track_ids": np.array([t.id for t in tracks], np.int64),  # (t,)
         "track_cls": np.array([t.cls for t in tracks], np.int64),
         "track_age": np.array([t.age for t in tracks], np.int64),
@@ -219,6 +224,11 @@ def _parse_state(
     crossing = _int_array(z, "crossing_counts", ndim=2)
     if crossing.shape[1:] != (2,) or np.any(crossing < 0):
         raise ValueError(f"crossing_counts must be (c, 2) and >= 0, got {crossing.shape}")
+    merge_pose = z["merge_pose"]
+    if merge_pose.dtype != np.float64 or merge_pose.shape not in ((0,), (3,)):
+        raise ValueError(f"merge_pose must be (3,) or (0,) float64, got {merge_pose.shape}")
+    if not np.all(np.isfinite(merge_pose)):
+        raise ValueError("merge_pose contains NaN or inf")
     counts_s = _int_array(z, "stats_counts")
     seconds = z["stats_seconds"]
     if counts_s.shape != (len(STAT_COUNTS),) or seconds.shape != (len(STAGES),):
@@ -236,6 +246,7 @@ def _parse_state(
         "untracked": int(_int_array(z, "untracked", ndim=0)),
         "alias": {int(a): int(b) for a, b in alias},
         "crossing_counts": {int(a): int(b) for a, b in crossing},
+        "merge_pose": tuple(float(v) for v in merge_pose) if len(merge_pose) else None,
         "stats": stats,
     }
     return tracks, restore

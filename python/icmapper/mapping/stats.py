@@ -33,6 +33,7 @@ class MapperStats:
     split: int = 0  # tracks whose view ran beside their instance: a new instance (beside_gate)
     absorbed: int = 0  # instances absorbed into a same-class neighbour (``mapping.absorb``)
     stubs: int = 0  # lane-line stubs across the lanes removed (``drop_stubs``, mapping.map_nms)
+    still: int = 0  # frames that merged nothing: the ego stood still (``min_travel``)
     merge_failures: int = 0
     failures: list[str] = field(default_factory=list)
 
