@@ -229,6 +229,30 @@ def test_removal_relative_to_the_reference() -> None:
         UpdateConfig(remove_drop=(1.0, 0.0, 1.0))
 
 
+def test_a_stopped_car_is_one_view() -> None:
+    """A car standing at one pose for 10 frames with a lane line hidden (a lorry beside it at a
+    light) gives one frame of evidence (``min_travel``): the line is not removed; counted once
+    per frame (``min_travel`` 0) it would be."""
+    from icmapper.city.update import ChangeDetector, UpdateConfig
+
+    world = _world([])
+    pose = _drive(world).poses[0]
+    x = np.linspace(-25.0, 25.0, 20)  # (20,) ego x
+    seen = np.stack([x, np.full_like(x, -pose[1, 3])], 1)[None]  # (1, 20, 2): y = 0 only
+
+    def removed(config: UpdateConfig) -> tuple[list, int]:
+        det = ChangeDetector(_stored(world), RANGE_60x30, lambda p: np.ones(len(p), bool), config)
+        for i in range(10):
+            det.observe((1, i), pose, np.full(1, int(MapClass.DIVIDER)), np.ones(1), seen)
+        out = det.decide()
+        return [(c.change, c.instance) for c in out if c.cls == MapClass.DIVIDER], det.still
+
+    assert removed(UpdateConfig(min_travel=0.0)) == ([("removed", 2)], 0)
+    assert removed(UpdateConfig()) == ([], 9)
+    with pytest.raises(ValueError, match="min_travel"):
+        UpdateConfig(min_travel=float("nan"))
+
+
 def _only(world: WorldMap, keep: set[int], extra: list | None = None) -> WorldMap:
     w = _world(extra or [])
     w.instances = [m for m in w.instances if m.id in keep or m.id > 5]

@@ -9,9 +9,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 from icmapper.data.sim.rig import nuscenes_rig
-from icmapper.data.types import Frame, xy_yaw_to_pose
+from icmapper.data.types import STILL_TURN, Frame, xy_yaw_to_pose
 from icmapper.mapping.config import MapperConfig
-from icmapper.mapping.mapper import STILL_TURN, Mapper
+from icmapper.mapping.mapper import Mapper
 from icmapper.mapping.types import Detections
 
 RIG = nuscenes_rig((32, 88))

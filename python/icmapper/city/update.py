@@ -40,6 +40,11 @@ the detections the map was built from), what the detector already showed before 
 taken out: a stored point's offset counts relative to the reference's median offset there
 (the detector's own bias at that place: a learned detector draws some lines a fixed 0.3-0.6 m
 off the map, and a move is what changed beyond that).
+
+A frame of a drive whose car still stands where it stood at that drive's last frame observed
+(within ``min_travel``, ``data.types.stands_still``) gathers no evidence: a car stopped at a light
+shows one view, and counting it once per frame would confirm a removal from a line hidden behind
+one lorry.
 """
 
 from __future__ import annotations
@@ -53,7 +58,13 @@ from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
 from icmapper.data.gt import in_range_counts
-from icmapper.data.types import CLASS_NAMES, MapClass, PerceptionRange, pose_to_xy_yaw
+from icmapper.data.types import (
+    CLASS_NAMES,
+    MapClass,
+    PerceptionRange,
+    pose_to_xy_yaw,
+    stands_still,
+)
 
 if TYPE_CHECKING:
     from icmapper._icmap import GlobalMap
@@ -85,13 +96,14 @@ class UpdateConfig:
     add_gate: float = 1.0
     add_frames: int = 3
     add_share: float = 0.5
+    min_travel: float = 0.5  # metres: a frame of a car standing still is evidence once
 
     def __post_init__(self) -> None:
         if len(self.remove_drop) != 3 or not all(x > 0 for x in self.remove_drop):
             raise ValueError(
                 f"UpdateConfig.remove_drop must be 3 values > 0, got {self.remove_drop}"
             )
-        for name in ("margin", "min_add_length", "add_gate", "remove_gate"):
+        for name in ("margin", "min_add_length", "add_gate", "remove_gate", "min_travel"):
             v = getattr(self, name)
             if not (np.isfinite(v) and v >= 0):
                 raise ValueError(f"UpdateConfig.{name} must be finite and >= 0, got {v}")
@@ -235,6 +247,8 @@ class ChangeDetector:
         self.stored: dict[int, _Stored] = {}
         self.candidates: list[_Candidate] = []
         self.frames: list[FrameKey] = []
+        self.still = 0  # frames left out: the car stood still (``min_travel``)
+        self._last: dict[int, tuple[float, float, float]] = {}  # drive -> last pose observed
 
     def _stored(self, i: int) -> _Stored:
         if i not in self.stored:
@@ -253,14 +267,21 @@ class ChangeDetector:
         points: NDArray[np.floating],
     ) -> None:
         """One frame: ``pose`` (4, 4) ego -> world, detections ``classes`` (k,), ``scores``
-        (k,), ``points`` (k, n, 2) in the ego frame."""
+        (k,), ``points`` (k, n, 2) in the ego frame. A frame of a drive whose car still stands
+        where it stood at that drive's last frame observed (``data.types.stands_still`` with
+        ``min_travel``) is left out: a stopped car's view is one piece of evidence, not one per
+        frame (a line hidden behind a lorry at a light is not missed 30 times)."""
         from icmapper.data.types import ego_to_world
 
+        xyyaw = pose_to_xy_yaw(pose)
+        if stands_still(xyyaw, self._last.get(key[0]), self.cfg.min_travel):
+            self.still += 1
+            return
+        self._last[key[0]] = xyyaw
         self.frames.append(key)
         keep = np.asarray(scores) >= self.cfg.score_threshold  # (k,)
         world = [ego_to_world(p, pose) for p in np.asarray(points)[keep]]  # k' x (n, 2)
         cls_of = np.asarray(classes)[keep]  # (k',)
-        xyyaw = pose_to_xy_yaw(pose)
         ids = self.gmap.query(xyyaw, (self.rng.half_x, self.rng.half_y), self.cfg.gate[2])
         stored = [(int(i), self._stored(int(i))) for i in ids.tolist()]
         for c in range(len(CLASS_NAMES)):

@@ -221,6 +221,26 @@ def pose_to_xy_yaw(pose: NDArray[np.float64]) -> tuple[float, float, float]:
     return float(pose[0, 3]), float(pose[1, 3]), float(np.arctan2(pose[1, 0], pose[0, 0]))
 
 
+#: Degrees the ego must turn, below the travel of ``stands_still``, to count as moving.
+STILL_TURN = 5.0
+
+
+def stands_still(
+    xyyaw: tuple[float, float, float],
+    last: tuple[float, float, float] | None,
+    min_travel: float,
+) -> bool:
+    """Whether the ego at (x, y, yaw) still stands where it was at ``last``: within
+    ``min_travel`` metres, turned less than ``STILL_TURN`` degrees (``last`` None or
+    ``min_travel`` 0: False). The mapper's ``MapperConfig.min_travel`` and the city update's
+    ``UpdateConfig.min_travel`` read it."""
+    if last is None or min_travel <= 0:
+        return False
+    moved = float(np.hypot(xyyaw[0] - last[0], xyyaw[1] - last[1]))
+    turned = abs((xyyaw[2] - last[2] + np.pi) % (2 * np.pi) - np.pi)
+    return moved < min_travel and turned < np.radians(STILL_TURN)
+
+
 def xy_yaw_to_pose(x: float, y: float, yaw: float, z: float = 0.0) -> NDArray[np.float64]:
     """(x, y, yaw) -> (4, 4) SE(3) ego->world (flat ground)."""
     c, s = np.cos(yaw), np.sin(yaw)

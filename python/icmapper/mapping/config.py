@@ -126,7 +126,7 @@ class MapperConfig:
     min_travel: float = _f(
         0.5,
         "metres; a frame whose ego moved less than this (and turned less than "
-        "mapping.mapper.STILL_TURN degrees) since the last frame that merged merges nothing: a "
+        "data.types.STILL_TURN degrees) since the last frame that merged merges nothing: a "
         "stopped car sees one view again and again, and its errors would pile into the map (its "
         "detections are still tracked, fused and reported; 0: every frame merges)",
     )

@@ -32,9 +32,9 @@ Per frame (paper Fig. 2):
 
 Steps 6 and 7 are left out while the ego stands still (``min_travel``, an extension): a frame
 whose pose lies within ``min_travel`` metres and ``STILL_TURN`` degrees of the last frame that
-merged merges nothing (a car stopped at a light sees one view again and again, and merging it
-every frame piles that view's errors into the map); its detections are still tracked, fused and
-reported.
+merged (``data.types.stands_still``) merges nothing (a car stopped at a light sees one view
+again and again, and merging it every frame piles that view's errors into the map); its
+detections are still tracked, fused and reported.
 
 This module is the pipeline and the state it carries; each step's logic has its own module:
 ``associate`` (scores; the assignment is ``tracker``'s), ``reid``, ``fuse``, ``merge`` (with the
@@ -58,6 +58,7 @@ from icmapper.data.types import (
     RANGE_60x30,
     Sequence,
     pose_to_xy_yaw,
+    stands_still,
 )
 from icmapper.mapping import state
 from icmapper.mapping.absorb import absorb_touched
@@ -73,9 +74,6 @@ from icmapper.mapping.stats import NETWORK_STAGES, STAGES, UNTRACKED_ID_BASE, Ma
 from icmapper.mapping.tracker import Tracker
 from icmapper.mapping.types import Detections, DetectionSource, StepResult
 from icmapper.mapping.variants import VARIANTS, Variant, network_settings
-
-#: Degrees the ego must turn, below ``min_travel`` of travel, for a frame to merge.
-STILL_TURN = 5.0
 
 if TYPE_CHECKING:
     import torch
@@ -289,7 +287,7 @@ class Mapper:
 
         inserted: list[int] = []
         merged: list[int] = []
-        if self._stands_still(xyyaw):
+        if stands_still(xyyaw, self._merge_pose, self.config.min_travel):
             self.stats.still += 1
         else:
             inserted, merged = self._merge(det, track_ids, fused, was_fused, pose, frame.index)
@@ -306,16 +304,6 @@ class Mapper:
         points[tracked] = fused
         self.stats.frames += 1
         return StepResult(frame.index, dets, all_ids, points, inserted, merged)
-
-    def _stands_still(self, xyyaw: tuple[float, float, float]) -> bool:
-        """Whether the ego (x, y, yaw) lies within ``min_travel`` metres and ``STILL_TURN``
-        degrees of the last frame that merged (``min_travel`` 0 or no merge yet: False)."""
-        last = self._merge_pose
-        if last is None or self.config.min_travel <= 0:
-            return False
-        moved = float(np.hypot(xyyaw[0] - last[0], xyyaw[1] - last[1]))
-        turned = abs((xyyaw[2] - last[2] + np.pi) % (2 * np.pi) - np.pi)
-        return moved < self.config.min_travel and turned < np.radians(STILL_TURN)
 
     def _associate(self, det: Detections, pose: NDArray[np.float64]) -> NDArray[np.int64]:
         """Track ids (k,) of the detections: scores against the buffer (``mapping.associate``),
