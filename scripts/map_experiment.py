@@ -193,16 +193,31 @@ def main(argv: list[str] | None = None) -> int:
         help="what-if: each drive stops for this many frames halfway (its middle frame held: "
         "the same pose and images; synthetic drives never stop; 'MapperConfig.min_travel')",
     )
+    ap.add_argument(
+        "--hz",
+        type=float,
+        default=None,
+        help="what-if: synthetic drives sampled at this many keyframes per second (the same "
+        "routes; the sources' rate is data.types.KEYFRAME_HZ, 2)",
+    )
     a = ap.parse_args(argv)
 
     vec = replace(VectoriseParams(), **_parse_sets(a.vec, VectoriseParams))
     from icmapper.models.network import checkpoint_settings
 
+    if a.hz is not None:  # the synthetic driver's keyframe rate, for this run only
+        from functools import partial
+
+        import icmapper.data.sim.sequences as sim_sequences
+        from icmapper.data.sim.driver import drive
+
+        sim_sequences.drive = partial(drive, hz=a.hz)  # type: ignore[assignment]
     seqs = open_source(a.source, image_size=checkpoint_settings(a.checkpoint)[1])
     if a.stop:
         seqs = [with_stop(s, a.stop) for s in seqs]
     weights = hashlib.sha1(Path(a.checkpoint).read_bytes()).hexdigest()
-    key = hashlib.sha1(f"{weights}|{a.source}".encode()).hexdigest()[:10]
+    rate = f"|{a.hz}" if a.hz is not None else ""
+    key = hashlib.sha1(f"{weights}|{a.source}{rate}".encode()).hexdigest()[:10]
     cache = Path(a.cache) / key
     mapper = Mapper.from_checkpoint(a.checkpoint)
     cfg = MapperConfig.from_dict(_parse_sets(a.set, MapperConfig), mapper.config)

@@ -1,6 +1,7 @@
 """The ego standing still merges nothing (``MapperConfig.min_travel``): a stopped car's repeated
 view does not pile into the map, its detections are still tracked and reported, a turn or a move
-merges again, and a run saved during a stop resumes as it was."""
+merges again, and a run saved during a stop resumes as it was. Frames faster than the keyframes
+warn."""
 
 from __future__ import annotations
 
@@ -116,3 +117,25 @@ def test_resume_during_a_stop(tmp_path: Path) -> None:
     assert [r.merged for r in got] == [r.merged for r in ref[3:]]
     assert resumed.stats.still == full.stats.still == 3
     assert _snapshot(resumed) == _snapshot(full)
+
+
+def test_frames_faster_than_keyframes_warn_once() -> None:
+    """Frames 0.1 s apart (10 Hz) get one warning per sequence naming the keyframe rate; frames
+    0.5 s apart (the keyframes) none."""
+    import warnings
+
+    config = MapperConfig(min_hits=1, detect_threshold=0.0, track_threshold=0.0)
+    m = Mapper(_Scripted([_divider(2.0)] * 6), config=config)
+    with pytest.warns(UserWarning, match=r"0\.100 s apart.*2 Hz") as record:
+        for i in range(6):
+            m.step(Frame(i, 0.1 * i, xy_yaw_to_pose(1.5 * i, 0.0, 0.0), RIG))
+    assert len([w for w in record if "apart" in str(w.message)]) == 1
+    m.reset()  # a new sequence warns again
+    with pytest.warns(UserWarning, match="apart"):
+        for i in range(2):
+            m.step(Frame(i, 0.1 * i, xy_yaw_to_pose(1.5 * i, 0.0, 0.0), RIG))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        m.reset()
+        for i in range(6):
+            m.step(Frame(i, 0.5 * i, xy_yaw_to_pose(1.5 * i, 0.0, 0.0), RIG))

@@ -55,7 +55,15 @@ from icmapper.data.extract import (
     union_contours,
 )
 from icmapper.data.images import RealImages, fit_intrinsics, resolve_images
-from icmapper.data.types import CameraRig, LaneSegment, MapClass, MapInstance, Sequence, WorldMap
+from icmapper.data.types import (
+    KEYFRAME_HZ,
+    CameraRig,
+    LaneSegment,
+    MapClass,
+    MapInstance,
+    Sequence,
+    WorldMap,
+)
 
 #: The seven ring cameras, in the order of the rig.
 AV2_RING_CAMERAS: tuple[str, ...] = (
@@ -286,7 +294,7 @@ def read_raw_poses(
 
 
 def load_av2_poses(
-    log_dir: str | Path, hz: float = 2.0
+    log_dir: str | Path, hz: float = KEYFRAME_HZ
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Ego poses of a log subsampled to `hz` -> (timestamps (T,) seconds, poses (T, 4, 4) SE(3)
     ego->city). Raises DataError for a missing/broken feather, duplicated timestamps or a gap
@@ -375,7 +383,7 @@ def _sensor_stamps(folder: Path, suffix: str) -> tuple[NDArray[np.int64], list[P
 
 
 def load_av2_sensor_frames(
-    log_dir: str | Path, image_size: tuple[int, int], hz: float = 2.0
+    log_dir: str | Path, image_size: tuple[int, int], hz: float = KEYFRAME_HZ
 ) -> tuple[NDArray[np.int64], NDArray[np.float64], list[CameraRig], list[list[Path]], list]:
     """The keyframes of a sensor log (module docstring) -> (sweep timestamps_ns (T,), poses
     (T, 4, 4) full SE(3) ego->city at the sweeps, per-keyframe rigs (7 ring cameras, cam ->

@@ -221,6 +221,11 @@ def pose_to_xy_yaw(pose: NDArray[np.float64]) -> tuple[float, float, float]:
     return float(pose[0, 3]), float(pose[1, 3]), float(np.arctan2(pose[1, 0], pose[0, 0]))
 
 
+#: Keyframes per second of every source (nuScenes' keyframes; AV2 and the synthetic drives are
+#: sampled to it) and so of what the learned detector's temporal memory and the tracker's
+#: frame counts were built for (docs/mapping.md, "Keyframes 0.5 s apart").
+KEYFRAME_HZ = 2.0
+
 #: Degrees the ego must turn, below the travel of ``stands_still``, to count as moving.
 STILL_TURN = 5.0
 

@@ -45,6 +45,7 @@ variants in ``variants``, saving and resuming in ``state``.
 from __future__ import annotations
 
 import time
+import warnings
 from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -53,6 +54,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from icmapper.data.types import (
+    KEYFRAME_HZ,
     Frame,
     PerceptionRange,
     RANGE_60x30,
@@ -122,6 +124,8 @@ class Mapper:
         self._untracked = UNTRACKED_ID_BASE
         self._alias: dict[int, int] = {}  # track id -> global instance id it maps into
         self._merge_pose: tuple[float, float, float] | None = None  # x, y, yaw of the last merge
+        self._last_time: float | None = None  # the previous frame's timestamp (seconds)
+        self._warned_rate = False
 
     # ------------------------------------------------------------------ construction
     @classmethod
@@ -215,6 +219,8 @@ class Mapper:
         self._untracked = UNTRACKED_ID_BASE
         self._alias = {}
         self._merge_pose = None
+        self._last_time = None
+        self._warned_rate = False
 
     def restore(
         self,
@@ -257,6 +263,7 @@ class Mapper:
         cfg = self.config
         pose = np.asarray(frame.pose, dtype=np.float64)
         xyyaw = pose_to_xy_yaw(pose)  # validates the pose
+        self._check_rate(float(frame.timestamp))
         sec = self.stats.seconds
         t0 = time.perf_counter()
         dets = self.source.detect(frame)
@@ -304,6 +311,21 @@ class Mapper:
         points[tracked] = fused
         self.stats.frames += 1
         return StepResult(frame.index, dets, all_ids, points, inserted, merged)
+
+    def _check_rate(self, t: float) -> None:
+        """Warns once per sequence when frames come much faster than ``KEYFRAME_HZ``: the
+        detector's temporal memory and the tracker's frame counts were built for keyframes 0.5 s
+        apart, and at 10 Hz the maps are far worse (docs/mapping.md, "Keyframes 0.5 s apart")."""
+        last, self._last_time = self._last_time, t
+        if last is None or self._warned_rate or not 0 < t - last < 0.5 / KEYFRAME_HZ:
+            return
+        self._warned_rate = True
+        warnings.warn(
+            f"{self.name}: frames {t - last:.3f} s apart; icmapper maps keyframes "
+            f"{1 / KEYFRAME_HZ:g} s apart ({KEYFRAME_HZ:g} Hz), and faster frames make worse "
+            "maps: subsample the frames to keyframes (docs/mapping.md, 'Keyframes 0.5 s apart')",
+            stacklevel=3,
+        )
 
     def _associate(self, det: Detections, pose: NDArray[np.float64]) -> NDArray[np.int64]:
         """Track ids (k,) of the detections: scores against the buffer (``mapping.associate``),

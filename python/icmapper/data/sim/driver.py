@@ -12,7 +12,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from icmapper.data.sim.geometry import arc_length, resample_by_length
-from icmapper.data.types import LaneSegment, WorldMap, xy_yaw_to_pose
+from icmapper.data.types import KEYFRAME_HZ, LaneSegment, WorldMap, xy_yaw_to_pose
 
 MIN_SPEED = 3.0  # m/s
 MAX_SPEED = 15.0  # m/s
@@ -20,7 +20,7 @@ _TRIES = 64  # start lanes tried before giving up on a too-small lane graph
 
 
 def drive(
-    world: WorldMap, seed: int, duration_s: float | None = None, hz: float = 2.0
+    world: WorldMap, seed: int, duration_s: float | None = None, hz: float = KEYFRAME_HZ
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Drives an ego through `world` along its lane graph.
 
