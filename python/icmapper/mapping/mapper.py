@@ -263,7 +263,6 @@ class Mapper:
         cfg = self.config
         pose = np.asarray(frame.pose, dtype=np.float64)
         xyyaw = pose_to_xy_yaw(pose)  # validates the pose
-        self._check_rate(float(frame.timestamp))
         sec = self.stats.seconds
         t0 = time.perf_counter()
         dets = self.source.detect(frame)
@@ -310,6 +309,7 @@ class Mapper:
         points = dets.points.copy()
         points[tracked] = fused
         self.stats.frames += 1
+        self._check_rate(float(frame.timestamp))
         return StepResult(frame.index, dets, all_ids, points, inserted, merged)
 
     def _check_rate(self, t: float) -> None:
