@@ -315,19 +315,9 @@ def with_stop(seq: Any, frames: int) -> Any:
     repeated; timestamps every 0.5 s), named "<name>-stop<frames>"."""
     k = len(seq) // 2
     idx = np.r_[np.arange(k + 1), np.full(frames, k), np.arange(k + 1, len(seq))]  # (T + frames,)
-    render = seq.render
-
-    def held(i: int) -> Any:
-        return render(int(idx[i]))
-
-    return replace(
-        seq,
-        name=f"{seq.name}-stop{frames}",
-        timestamps=np.arange(len(idx)) * 0.5,
-        poses=np.asarray(seq.poses)[idx],
-        render=held if render is not None else None,
-        frame_rigs=[seq.frame_rigs[j] for j in idx] if seq.frame_rigs is not None else None,
-    )
+    held = seq.select(idx, f"{seq.name}-stop{frames}")
+    held.timestamps = np.arange(len(idx)) * 0.5
+    return held
 
 
 def cd_directions(maps: list, ggts: list) -> dict[str, list[float]]:

@@ -1,7 +1,7 @@
 """The ego standing still merges nothing (``MapperConfig.min_travel``): a stopped car's repeated
 view does not pile into the map, its detections are still tracked and reported, a turn or a move
 merges again, and a run saved during a stop resumes as it was. Frames faster than the keyframes
-warn."""
+warn, and ``Sequence.keyframes`` takes a faster sequence back to them."""
 
 from __future__ import annotations
 
@@ -139,3 +139,23 @@ def test_frames_faster_than_keyframes_warn_once() -> None:
         m.reset()
         for i in range(6):
             m.step(Frame(i, 0.5 * i, xy_yaw_to_pose(1.5 * i, 0.0, 0.0), RIG))
+
+
+def test_keyframes_of_a_faster_sequence() -> None:
+    """``Sequence.keyframes`` takes a sequence at 10 Hz back to the 2 Hz keyframes: the same
+    poses, rigs and images as the drive sampled at 2 Hz; ``select`` refuses indices out of range."""
+    from icmapper.data.sources import open_source
+
+    base = open_source("sim:val:1", image_size=(32, 88))[0]
+    n = len(base)
+    idx = np.repeat(np.arange(n), 5)  # (5n,): every frame held five times
+    fast = base.select(idx, "fast")
+    fast.timestamps = np.arange(5 * n) * 0.1  # as if at 10 Hz
+    keys = fast.keyframes()
+    assert keys.name == "fast" and len(keys) == n
+    np.testing.assert_array_equal(keys.poses, base.poses)
+    np.testing.assert_allclose(np.diff(keys.timestamps), 0.5)
+    np.testing.assert_array_equal(keys.frame(3).images, base.frame(3).images)
+    assert len(base.keyframes()) == n  # already keyframes: whole
+    with pytest.raises(ValueError, match="frame indices"):
+        base.select(np.array([0, n]))

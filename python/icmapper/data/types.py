@@ -140,6 +140,12 @@ class Frame:
 IMAGE_KINDS = ("real", "rendered", "none")
 
 
+#: Keyframes per second of every source (nuScenes' keyframes; AV2 and the synthetic drives are
+#: sampled to it) and so of what the learned detector's temporal memory and the tracker's
+#: frame counts were built for (docs/mapping.md, "Keyframes 0.5 s apart").
+KEYFRAME_HZ = 2.0
+
+
 @dataclass
 class Sequence:
     """A drive through a world: T keyframes (timestamps (T,) seconds, poses (T, 4, 4)), the world
@@ -194,6 +200,40 @@ class Sequence:
         images = self.render(i) if (with_images and self.render is not None) else None
         return Frame(i, float(self.timestamps[i]), self.poses[i], self.rig_of(i), images)
 
+    def select(self, indices: NDArray[np.int64], name: str | None = None) -> Sequence:
+        """A sequence of the frames ``indices`` (k,) of this one, in that order (repeats
+        allowed): their timestamps, poses, rigs and images, the same world; named ``name`` (by
+        default this one's). ValueError for an index out of range."""
+        idx = np.asarray(indices, dtype=np.int64).reshape(-1)  # (k,)
+        if len(idx) == 0 or idx.min() < 0 or idx.max() >= len(self):
+            raise ValueError(f"sequence {self.name!r}: frame indices must lie in [0, {len(self)})")
+        render = self.render
+
+        def selected(i: int) -> NDArray[np.uint8]:
+            assert render is not None
+            return render(int(idx[i]))
+
+        return Sequence(
+            name or self.name,
+            self.source,
+            self.world,
+            np.asarray(self.timestamps, np.float64)[idx],
+            np.asarray(self.poses, np.float64)[idx],
+            self.rig,
+            selected if render is not None else None,
+            self.gt_ids_by_matching,
+            [self.frame_rigs[j] for j in idx] if self.frame_rigs is not None else None,
+            self.images,
+        )
+
+    def keyframes(self, hz: float = KEYFRAME_HZ) -> Sequence:
+        """The frames nearest to every 1 / ``hz`` seconds from the first (``hz`` defaults to the
+        keyframe rate icmapper's detector and tracker are built for: docs/mapping.md,
+        "Keyframes 0.5 s apart"); a sequence already at that rate or slower comes back whole."""
+        from icmapper.data.extract import subsample_indices
+
+        return self.select(subsample_indices(self.timestamps, hz))
+
 
 @dataclass
 class FrameGT:
@@ -220,11 +260,6 @@ def pose_to_xy_yaw(pose: NDArray[np.float64]) -> tuple[float, float, float]:
         raise ValueError("pose contains NaN or inf")
     return float(pose[0, 3]), float(pose[1, 3]), float(np.arctan2(pose[1, 0], pose[0, 0]))
 
-
-#: Keyframes per second of every source (nuScenes' keyframes; AV2 and the synthetic drives are
-#: sampled to it) and so of what the learned detector's temporal memory and the tracker's
-#: frame counts were built for (docs/mapping.md, "Keyframes 0.5 s apart").
-KEYFRAME_HZ = 2.0
 
 #: Degrees the ego must turn, below the travel of ``stands_still``, to count as moving.
 STILL_TURN = 5.0

@@ -323,7 +323,8 @@ class Mapper:
         warnings.warn(
             f"{self.name}: frames {t - last:.3f} s apart; icmapper maps keyframes "
             f"{1 / KEYFRAME_HZ:g} s apart ({KEYFRAME_HZ:g} Hz), and faster frames make worse "
-            "maps: subsample the frames to keyframes (docs/mapping.md, 'Keyframes 0.5 s apart')",
+            "maps: subsample the frames to keyframes (Sequence.keyframes(); docs/mapping.md, "
+            "'Keyframes 0.5 s apart')",
             stacklevel=3,
         )
 
