@@ -1,5 +1,6 @@
-"""The repository's shell scripts: each parses, and the GPU run's script refuses a bad phase
-before it touches anything (it runs on a lent machine: scripts/gpu_paper.sh)."""
+"""The repository's scripts: each shell script parses, the GPU run's script refuses a bad phase
+before it touches anything (it runs on a lent machine: scripts/gpu_paper.sh), and the mapping
+experiment's stopped drives are what its --stop says."""
 
 from __future__ import annotations
 
@@ -31,3 +32,30 @@ def test_gpu_paper_refuses_a_bad_phase(args: list[str], tmp_path: Path) -> None:
     assert done.returncode == 2
     assert "usage:" in done.stderr and "start MINUTES" in done.stderr
     assert not any(tmp_path.iterdir())  # nothing made before the check: no $OUT, no install
+
+
+def test_map_experiment_stop_holds_the_middle_frame() -> None:
+    """``scripts/map_experiment.py --stop N``'s drives: the middle frame held N more frames (its
+    pose and images), the rest as they were, keyframes 0.5 s apart."""
+    import importlib.util
+
+    import numpy as np
+    from icmapper.data.sources import open_source
+
+    spec = importlib.util.spec_from_file_location(
+        "map_experiment", REPO / "scripts" / "map_experiment.py"
+    )
+    assert spec is not None and spec.loader is not None
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    seq = open_source("sim:val:1", image_size=(32, 88))[0]
+    t, k = len(seq), len(seq) // 2
+    held = mod.with_stop(seq, 5)
+    assert held.name == f"{seq.name}-stop5" and len(held) == t + 5
+    poses = np.asarray(held.poses)
+    for j in range(k, k + 6):
+        np.testing.assert_array_equal(poses[j], seq.poses[k])
+    np.testing.assert_array_equal(poses[: k + 1], seq.poses[: k + 1])
+    np.testing.assert_array_equal(poses[k + 6 :], seq.poses[k + 1 :])
+    np.testing.assert_allclose(np.diff(held.timestamps), 0.5)
+    np.testing.assert_array_equal(held.frame(k + 3).images, seq.frame(k).images)
