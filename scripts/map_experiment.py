@@ -194,6 +194,9 @@ def main(argv: list[str] | None = None) -> int:
         "the same pose and images; synthetic drives never stop; 'MapperConfig.min_travel')",
     )
     ap.add_argument(
+        "--stop-at", type=int, default=None, help="the frame --stop holds (default: the middle)"
+    )
+    ap.add_argument(
         "--hz",
         type=float,
         default=None,
@@ -214,7 +217,7 @@ def main(argv: list[str] | None = None) -> int:
         sim_sequences.drive = partial(drive, hz=a.hz)  # type: ignore[assignment]
     seqs = open_source(a.source, image_size=checkpoint_settings(a.checkpoint)[1])
     if a.stop:
-        seqs = [with_stop(s, a.stop) for s in seqs]
+        seqs = [with_stop(s, a.stop, a.stop_at) for s in seqs]
     weights = hashlib.sha1(Path(a.checkpoint).read_bytes()).hexdigest()
     rate = f"|{a.hz}" if a.hz is not None else ""
     key = hashlib.sha1(f"{weights}|{a.source}{rate}".encode()).hexdigest()[:10]
@@ -310,12 +313,14 @@ def main(argv: list[str] | None = None) -> int:
     return 0
 
 
-def with_stop(seq: Any, frames: int) -> Any:
-    """``seq`` with its middle frame held for ``frames`` more frames (its pose and images
-    repeated; timestamps every 0.5 s), named "<name>-stop<frames>"."""
-    k = len(seq) // 2
+def with_stop(seq: Any, frames: int, at: int | None = None) -> Any:
+    """``seq`` with its frame ``at`` (None: the middle one) held for ``frames`` more frames (its
+    pose and images repeated; timestamps every 0.5 s), named "<name>-stop<frames>" ("...-at<K>"
+    for another frame than the middle)."""
+    k = len(seq) // 2 if at is None else min(max(int(at), 0), len(seq) - 1)
     idx = np.r_[np.arange(k + 1), np.full(frames, k), np.arange(k + 1, len(seq))]  # (T + frames,)
-    held = seq.select(idx, f"{seq.name}-stop{frames}")
+    name = f"{seq.name}-stop{frames}" + (f"-at{k}" if at is not None else "")
+    held = seq.select(idx, name)
     held.timestamps = np.arange(len(idx)) * 0.5
     return held
 
