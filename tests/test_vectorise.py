@@ -168,6 +168,7 @@ BAD_PARAMS: dict[str, Any] = {
     "ridge_sigma": 0.0,
     "ridge_curvature": -0.1,
     "ridge_classes": (0,),  # crossings are no lines
+    "bend": 181.0,
 }
 
 
@@ -439,6 +440,29 @@ def test_a_long_branch_at_a_junction_is_kept() -> None:
     assert len(got) == 2
     assert min(_chamfer(_dense(g), _dense(main)) for g in got) < 0.2
     assert min(_chamfer(_dense(g), _dense(stem)) for g in got) < 0.5
+
+
+@pytest.mark.parametrize("cls", [1, 2])
+def test_a_lane_line_is_cut_where_it_bends_sharply(cls: int) -> None:
+    """An L (20 m along the lanes, then 8 m across them): a lane line (a ridge class) becomes two
+    lines, one on each leg; a kerb, which turns at corners, stays one; with ``bend = 0`` the lane
+    line stays one too. A gently curving lane line (30 m radius) is never cut."""
+    leg, across = np.array([[-10.0, -4.0], [10.0, -4.0]]), np.array([[10.0, -4.0], [10.0, 4.0]])
+    prob = _lines_prob([np.concatenate([leg, across[1:]])], cls)
+    inst = vectorise(prob, HX, HY, VectoriseParams(upsample=1))
+    got = [p.astype(np.float64) for c, p in zip(inst.classes, inst.points, strict=True) if c == cls]
+    if cls == 1:
+        assert len(got) == 2
+        for truth in (leg, across):
+            assert min(_chamfer(_dense(g), _dense(truth)) for g in got) < 0.3
+        whole = vectorise(prob, HX, HY, VectoriseParams(upsample=1, bend=0.0))
+        assert int((whole.classes == cls).sum()) == 1
+    else:
+        assert len(got) == 1
+    t = np.linspace(0.0, 0.8, 40)
+    arc = np.stack([30 * np.sin(t) - 12, 30 * (1 - np.cos(t)) - 8], 1)  # (40, 2), 24 m
+    curved = vectorise(_lines_prob([arc], 1), HX, HY, VectoriseParams(upsample=1))
+    assert int((curved.classes == 1).sum()) == 1
 
 
 def test_through_and_spur_are_checked() -> None:

@@ -147,6 +147,7 @@ def vectorise(
     num_points: int = 20,
     edge_margin: float = 1.5,
     edge_span: float = 3.0,
+    bend: float = 45.0,
     parallel: bool = True,
 ) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.float32], npt.NDArray[np.float32]]:
     """Map instances of one frame from the segmentation's class probabilities (the vectoriser).
@@ -156,14 +157,15 @@ def vectorise(
     others open polylines. The settings are ``icmapper.models.vectorise.VectoriseParams``' (the
     Python ``vectorise`` passes them): bilinear upsampling, thresholds, the ridge mask of
     ``ridge_classes``, skeleton branches joined through junctions (``through`` degrees) with spurs
-    under ``spur`` metres dropped, simplified and resampled to ``num_points``, ridge lines along the
-    front or back edge of the grid (``edge_margin``, ``edge_span``) dropped; crossing masks cut
-    into one part per crossing, outlined and shrunk. ``parallel``: the classes at once on the
-    engine's thread pool (same result). Returns ``(classes (N,) int64, scores (N,) float32 (mean
-    probability of the instance's cells), points (N, num_points, 2) float32 ego metres)``, classes
-    in index order. ValueError on an empty axis, NaN/inf probabilities or extents, bad settings
-    (as ``VectoriseParams``) or an upsampled grid beyond 2**26 cells; TypeError for another dtype
-    or number of axes. Runs with the GIL released.
+    under ``spur`` metres dropped, simplified, ridge lines cut where they turn by more than
+    ``bend`` degrees, resampled to ``num_points``, ridge lines along the front or back edge of the
+    grid (``edge_margin``, ``edge_span``) dropped; crossing masks cut into one part per crossing,
+    outlined and shrunk. ``parallel``: the classes at once on the engine's thread pool (same
+    result). Returns ``(classes (N,) int64, scores (N,) float32 (mean probability of the
+    instance's cells), points (N, num_points, 2) float32 ego metres)``, classes in index order.
+    ValueError on an empty axis, NaN/inf probabilities or extents, bad settings (as
+    ``VectoriseParams``) or an upsampled grid beyond 2**26 cells; TypeError for another dtype or
+    number of axes. Runs with the GIL released.
     """
 
 class InstanceInfo(TypedDict):

@@ -19,6 +19,11 @@ from the masks instead (``model.instances = "segmentation"``):
   at every junction, one line became pieces and stubs; validation mAP 75.4 -> 77.9, sim:val:12,
   docs/mapping.md). Each line is simplified and resampled to P points; lines shorter than
   ``min_length`` metres are dropped;
+- a ridge line is cut where it bends sharply (``bend``, 45 degrees, measured over ``BEND_ARC``,
+  1.5 m, on either side of a vertex of the simplified line; pieces under ``min_length`` dropped,
+  each piece scored as its whole line): a painted lane line curves gently, so such a corner is
+  a skeleton that ran from one line across the lanes or into another (sim:val:32: divider pieces
+  per true line 1.44 -> 1.33, docs/mapping.md, "Lane lines bend gently");
 - a ridge line along the front or back edge of the grid is dropped (``edge_margin``,
   ``edge_span``): the ridge's Gaussian reads zeros past the grid, so lane lines entering or leaving
   the range leave a ridge across the lanes at the edge, one per frame, moving with the car
@@ -51,6 +56,9 @@ from numpy.typing import NDArray
 CROSSING = 0
 #: Class index of dividers (the default ``ridge_classes``).
 DIVIDER = 1
+#: Metres of a line on either side of a vertex over which ``VectoriseParams.bend`` measures its
+#: turn (the engine's ``vectorise::bend::BEND_ARC``).
+BEND_ARC = 1.5
 #: Whether ``vectorise`` runs the classes of a frame at once on the engine's thread pool (the
 #: result is the same either way). Back to back it pays (1.4-1.6x, ``python -m benchmarks
 #: vectorise``); inside ``Mapper.step`` it does not: the pool's threads fall asleep during the
@@ -87,6 +95,8 @@ class VectoriseParams:
     edge_margin: float = 1.5  # a ridge-class line within this of the front or back edge of the
     # grid over most of its points, spanning more than ``edge_span`` across it, is dropped (0: kept)
     edge_span: float = 3.0
+    bend: float = 45.0  # degrees; a ridge-class line turning by more than this within
+    # ``BEND_ARC`` metres on either side of a vertex is cut there (0: never)
 
     def __post_init__(self) -> None:
         if self.upsample < 1 or self.num_points < 2:
@@ -104,6 +114,8 @@ class VectoriseParams:
             raise ValueError(
                 f"vectorise: rectangularity must be in [0, 1], got {self.rectangularity}"
             )
+        if not 0.0 <= self.bend <= 180.0:
+            raise ValueError(f"vectorise: bend must be in [0, 180] degrees, got {self.bend}")
         if not 0.0 <= self.through <= 90.0:
             raise ValueError(f"vectorise: through must be in [0, 90] degrees, got {self.through}")
         if self.shrink is not None and not self.shrink >= 0:

@@ -4,8 +4,9 @@ of the engine's ``icmap_geom::vectorise`` in tests and benchmarks. Not part of t
 module outside tests and benchmarks.
 
 It is ``models/vectorise.py`` as it was before the port (commit 4c267ec), unchanged but for the
-function's name (``vectorise_reference``) and the imports of the shared types. What it does, step
-by step, is described in ``icmapper.models.vectorise`` and in the engine's module docs.
+function's name (``vectorise_reference``), the imports of the shared types and the rules added
+since in both (ridge lines along the front or back edge dropped, cut where they bend). What it
+does, step by step, is described in ``icmapper.models.vectorise`` and in the engine's module docs.
 
 Where the engine cannot agree with it exactly (both are deterministic; the differences are in the
 last bits of float32 arithmetic): torch's bilinear upsampling sums in float32 in an order that
@@ -16,6 +17,7 @@ call are used in their own dtype here (float64 for float64 input) and in float32
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Iterator
 from typing import TYPE_CHECKING
 
@@ -23,6 +25,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from icmapper.models.vectorise import (
+    BEND_ARC,
     CROSSING,
     VectorInstances,
     VectoriseParams,
@@ -302,6 +305,62 @@ def _along_edge(pts: NDArray[np.float32], half_x: float, margin: float, span: fl
     return float(q[:, 1].max() - q[:, 1].min()) > span
 
 
+def _at(line: NDArray[np.float64], cum: NDArray[np.float64], t: float) -> NDArray[np.float64]:
+    """The point at arc length ``t`` along ``line`` (L, 2), clamped to its ends."""
+    if t <= 0:
+        return line[0]
+    if t >= cum[-1]:
+        return line[-1]
+    j = min(int(np.searchsorted(cum, t, side="right")) - 1, len(line) - 2)
+    length = cum[j + 1] - cum[j]
+    if length <= 0:
+        return line[j]
+    u = (t - cum[j]) / length
+    return np.array([line[j, 0] + u * (line[j + 1, 0] - line[j, 0]),
+                     line[j, 1] + u * (line[j + 1, 1] - line[j, 1])])  # fmt: skip
+
+
+def _cut_at_bends(
+    line: NDArray[np.float64], bend: float, min_length: float, offset: int = 0
+) -> list[tuple[int, int]]:
+    """A line (L, 2) cut at every vertex where it turns by more than ``bend`` degrees over
+    ``BEND_ARC`` metres on either side (the sharpest first, the first of equals, then each side
+    again): the pieces as inclusive vertex spans, in order; pieces shorter than ``min_length``
+    left out (an uncut line comes back whole)."""
+    steps = [math.sqrt(d[0] * d[0] + d[1] * d[1]) for d in np.diff(line, axis=0)]
+    cum = np.concatenate([[0.0], np.cumsum(steps)])
+    best, best_turn = -1, 0.0
+    for i in range(1, len(line) - 1) if bend > 0 else ():
+        a = line[i] - _at(line, cum, cum[i] - BEND_ARC)
+        b = _at(line, cum, cum[i] + BEND_ARC) - line[i]
+        na, nb = math.sqrt(a[0] * a[0] + a[1] * a[1]), math.sqrt(b[0] * b[0] + b[1] * b[1])
+        if na <= 0 or nb <= 0:
+            continue
+        cos = (a[0] * b[0] + a[1] * b[1]) / (na * nb)
+        turn = math.degrees(math.acos(min(1.0, max(-1.0, cos))))
+        if turn > bend and (best < 0 or turn > best_turn):
+            best, best_turn = i, turn
+    if best < 0:
+        return [(offset, offset + len(line) - 1)]
+    out = []
+    if cum[best] >= min_length:
+        out += _cut_at_bends(line[: best + 1], bend, min_length, offset)
+    if cum[-1] - cum[best] >= min_length:
+        out += _cut_at_bends(line[best:], bend, min_length, offset + best)
+    return out
+
+
+def _vertex_cells(line: NDArray[np.float64], simple: NDArray[np.float64]) -> list[int]:
+    """For each vertex of ``simple`` (a simplification of ``line``) the index of its point in
+    ``line``, found forward."""
+    at, k = [], 0
+    for v in simple:
+        while k + 1 < len(line) and not (line[k] == v).all():
+            k += 1
+        at.append(k)
+    return at
+
+
 def vectorise_reference(
     prob: NDArray[np.floating],
     half_x: float,
@@ -370,12 +429,18 @@ def vectorise_reference(
             continue
         for path, line in _skeleton_branches(mask, metres, p.min_length, p.through, p.spur):
             simple = np.asarray(line.simplify(p.simplify).coords, np.float64)
-            pts = resample_polyline(simple, p.num_points, closed=False)
-            if k in p.ridge_classes and _along_edge(pts, half_x, p.edge_margin, p.edge_span):
-                continue
-            classes.append(k)
-            scores.append(float(prob[k][path[:, 0], path[:, 1]].mean()))
-            points.append(pts)
+            ridge = k in p.ridge_classes
+            spans = _cut_at_bends(simple, p.bend, p.min_length) if ridge else [(0, len(simple) - 1)]
+            coords = np.asarray(line.coords, np.float64)
+            at = _vertex_cells(coords, simple) if len(spans) > 1 else []
+            for a, b in spans:
+                pts = resample_polyline(simple[a : b + 1], p.num_points, closed=False)
+                if ridge and _along_edge(pts, half_x, p.edge_margin, p.edge_span):
+                    continue
+                own = path[at[a] : at[b] + 1] if at else path  # a cut piece: its own cells
+                classes.append(k)
+                scores.append(float(prob[k][own[:, 0], own[:, 1]].mean()))
+                points.append(pts)
     n_out = len(classes)
     return VectorInstances(
         np.asarray(classes, np.int64),

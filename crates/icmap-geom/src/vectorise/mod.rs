@@ -16,6 +16,7 @@
 //! - [`hull`], [`buffer`], [`principal`]: convex hulls, mitre offsets and principal axes of cell
 //!   sets (GEOS / LAPACK semantics);
 //! - [`crossings`]: crossing components, cut into one part per crossing, and their outlines;
+//! - [`bend`]: ridge-class lines cut where they turn sharply (a lane line bends gently);
 //! - [`edge`]: ridge lines along the front and back edges of the grid (the zero padding's, not
 //!   a line's) dropped;
 //! - [`polyline`]: arc-length resampling (numpy `interp` semantics) and polyline lengths.
@@ -24,6 +25,7 @@
 //! the former Python implementation, which is the oracle of its tests. What it must not do: read
 //! files, know the network, or panic on any input (every failure is a [`GeomError`]).
 
+pub mod bend;
 pub mod branches;
 pub mod buffer;
 pub mod crossings;
@@ -95,6 +97,9 @@ pub struct VectoriseParams {
     pub edge_margin: f64,
     /// Metres a dropped edge line spans across the edge at least.
     pub edge_span: f64,
+    /// Degrees; a ridge-class line turning by more than this within [`bend::BEND_ARC`] metres
+    /// on either side of a vertex is cut there (0: never).
+    pub bend: f64,
 }
 
 impl Default for VectoriseParams {
@@ -119,6 +124,7 @@ impl Default for VectoriseParams {
             num_points: 20,
             edge_margin: 1.5,
             edge_span: 3.0,
+            bend: 45.0,
         }
     }
 }
@@ -167,6 +173,12 @@ impl VectoriseParams {
             return Err(invalid(
                 "rectangularity",
                 format!("must be in [0, 1], got {}", self.rectangularity),
+            ));
+        }
+        if !(0.0..=180.0).contains(&self.bend) {
+            return Err(invalid(
+                "bend",
+                format!("must be in [0, 180] degrees, got {}", self.bend),
             ));
         }
         if !(0.0..=90.0).contains(&self.through) {
@@ -501,13 +513,42 @@ pub fn vectorise_class(
     let ridge = p.ridge_classes.contains(&k);
     for (path, line) in branches::skeleton_branches(&mask, frame, p.min_length, p.through, p.spur) {
         let simple = simplify::simplify_line(&line, p.simplify);
-        let pts = polyline::resample_polyline(&simple, p.num_points, false);
-        if ridge && edge::along_front_or_back_edge(&pts, frame.half_x, p.edge_margin, p.edge_span) {
-            continue;
+        let spans = if ridge {
+            bend::cut_at_bends(&simple, p.bend, p.min_length)
+        } else {
+            vec![(0, simple.len() - 1)]
+        };
+        // a piece of a cut line is scored by its own cells: those of its vertices' span
+        let cells = (spans.len() > 1).then(|| vertex_cells(&line, &simple));
+        for (a, b) in spans {
+            let pts = polyline::resample_polyline(&simple[a..=b], p.num_points, false);
+            if ridge
+                && edge::along_front_or_back_edge(&pts, frame.half_x, p.edge_margin, p.edge_span)
+            {
+                continue;
+            }
+            let own = match &cells {
+                Some(at) => &path[at[a]..=at[b]],
+                None => &path[..],
+            };
+            out.push(k, score(own), pts);
         }
-        out.push(k, score(&path), pts);
     }
     out
+}
+
+/// For each vertex of `simple` (a simplification of `line`, whose vertices are copies of
+/// `line`'s points in order) the index of its point in `line`, found forward.
+fn vertex_cells(line: &[Point], simple: &[Point]) -> Vec<usize> {
+    let mut at = Vec::with_capacity(simple.len());
+    let mut k = 0;
+    for v in simple {
+        while k + 1 < line.len() && line[k] != *v {
+            k += 1;
+        }
+        at.push(k);
+    }
+    at
 }
 
 #[cfg(test)]
