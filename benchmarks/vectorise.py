@@ -63,9 +63,16 @@ def ground_truth_masks(source: str, limit: int) -> tuple[list[np.ndarray], float
 
 
 def _engine(prob: np.ndarray, hx: float, hy: float, parallel: bool) -> Any:
-    from icmapper import _icmap
+    """The engine's call with the shipped settings resolved for this grid, as
+    ``models.vectorise.vectorise`` makes it (the binding's own defaults are the 50x25 grid's:
+    its ``shrink`` of 0.9 m is twice the 100x50 grid's target radius)."""
+    from dataclasses import asdict
 
-    return _icmap.vectorise(prob, hx, hy, parallel=parallel)
+    from icmapper import _icmap
+    from icmapper.models.vectorise import VectoriseParams
+
+    p = VectoriseParams().for_grid(prob.shape[1], prob.shape[2], hx, hy)
+    return _icmap.vectorise(prob, hx, hy, **asdict(p), parallel=parallel)
 
 
 def _per_frame(fn: Any, frames: list[np.ndarray], rounds: int) -> list[float]:
