@@ -10,7 +10,10 @@ what it draws elsewhere), the instance's length and observations. A short true p
 everything is a sliver of the visited area; "true to map" large with "map to true" small is a
 line the map holds in several pieces; both large, a line joined to another or missed. Prints
 how many true instances have a match within 0.5, 1.0 and 1.5 m first (an upper bound of GAP's
-recall at each threshold: matches are one-to-one there).
+recall at each threshold: matches are one-to-one there), and the same for the true lines that
+lie on themselves (column U: a kerb around a median island, one instance up one side, round the
+nose and down the other; within ``U_GAP`` metres of itself over more than ``U_LENGTH`` metres,
+counting samples more than ``U_APART`` metres apart along it).
 
     .venv/bin/python scripts/diagnose_gap.py --source sim:val:12 --maps /tmp/maps/icmapper --cls 2
 """
@@ -22,6 +25,27 @@ import sys
 from pathlib import Path
 
 import numpy as np
+
+#: A true line lies on itself where a sample has another within this many metres ...
+U_GAP = 4.0
+#: ... at least this far along the line from it ...
+U_APART = 8.0
+#: ... over more than this many metres of its length.
+U_LENGTH = 10.0
+
+
+def lies_on_itself(points: np.ndarray) -> bool:
+    """Whether a polyline (n, 2) comes back within ``U_GAP`` of itself over more than
+    ``U_LENGTH`` metres (samples every 0.5 m, pairs more than ``U_APART`` apart along it)."""
+    from scipy.spatial import cKDTree
+
+    p = np.asarray(points, dtype=np.float64)
+    cum = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(p, axis=0), axis=1))])
+    t = np.arange(0.0, cum[-1] + 1e-9, 0.5)  # (m,)
+    d = np.stack([np.interp(t, cum, p[:, 0]), np.interp(t, cum, p[:, 1])], axis=1)  # (m, 2)
+    near = cKDTree(d).query_ball_point(d, U_GAP)
+    on_itself = sum(any(abs(t[j] - t[i]) > U_APART for j in js) for i, js in enumerate(near))
+    return 0.5 * on_itself > U_LENGTH
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -58,26 +82,31 @@ def main(argv: list[str] | None = None) -> int:
                 to_true = float(cKDTree(gs).query(ps)[0].mean())
                 if 0.5 * (to_map + to_true) < best[0]:
                     best = (0.5 * (to_map + to_true), to_map, to_true, k)
-            rows.append((seq.name, length, *best))
+            u = not g.closed and lies_on_itself(g.points)
+            rows.append((seq.name, length, *best, u))
     rows.sort(key=lambda r: -r[2])
     name = CLASS_NAMES[a.cls]
+    for what, sel in (("", rows), (" lying on themselves (U)", [r for r in rows if r[6]])):
+        print(
+            f"{len(sel)} true {name} instances{what}; nearest map instance within 0.5 / 1.0 / "
+            "1.5 m: " + " / ".join(str(sum(r[2] <= t for r in sel)) for t in (0.5, 1.0, 1.5))
+        )
     print(
-        f"{len(rows)} true {name} instances; nearest map instance within 0.5 / 1.0 / 1.5 m: "
-        + " / ".join(str(sum(r[2] <= t for r in rows)) for t in (0.5, 1.0, 1.5))
+        "| drive | true length m | U | Chamfer m | true to map | map to true | map length m | obs |"
     )
-    print("| drive | true length m | Chamfer m | true to map | map to true | map length m | obs |")
-    print("|---|---|---|---|---|---|---|")
-    for drive, length, cd, to_map, to_true, k in rows:
+    print("|---|---|---|---|---|---|---|---|")
+    for drive, length, cd, to_map, to_true, k, u in rows:
         if cd <= a.show:
             break
+        mark = "U" if u else ""
         if k < 0:
-            print(f"| {drive} | {length:.1f} | no map instance | | | | |")
+            print(f"| {drive} | {length:.1f} | {mark} | no map instance | | | | |")
             continue
         _, pts, _, obs = preds_of[drive][k]
         plen = float(np.linalg.norm(np.diff(np.asarray(pts), axis=0), axis=1).sum())
         print(
-            f"| {drive} | {length:.1f} | {cd:.2f} | {to_map:.2f} | {to_true:.2f} | {plen:.1f} "
-            f"| {obs:.0f} |"
+            f"| {drive} | {length:.1f} | {mark} | {cd:.2f} | {to_map:.2f} | {to_true:.2f} "
+            f"| {plen:.1f} | {obs:.0f} |"
         )
     return 0
 

@@ -59,3 +59,27 @@ def test_map_experiment_stop_holds_the_middle_frame() -> None:
     np.testing.assert_array_equal(poses[k + 6 :], seq.poses[k + 1 :])
     np.testing.assert_allclose(np.diff(held.timestamps), 0.5)
     np.testing.assert_array_equal(held.frame(k + 3).images, seq.frame(k).images)
+
+
+def test_diagnose_gap_finds_a_kerb_round_an_island() -> None:
+    """``scripts/diagnose_gap.py``'s U column: a kerb up one side of a 2.5 m island, round its
+    nose and down the other lies on itself; a straight kerb, an L and a U too short do not."""
+    import importlib.util
+
+    import numpy as np
+
+    spec = importlib.util.spec_from_file_location(
+        "diagnose_gap", REPO / "scripts" / "diagnose_gap.py"
+    )
+    assert spec is not None and spec.loader is not None
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    nose = np.stack(
+        [1.25 * np.sin(np.linspace(0, np.pi, 9)), 1.25 * np.cos(np.linspace(0, np.pi, 9))], 1
+    )
+    island = np.concatenate([[[-30.0, 1.25]], nose, [[-30.0, -1.25]]])  # 30 m each side
+    assert mod.lies_on_itself(island)
+    assert not mod.lies_on_itself(np.array([[0.0, 0.0], [60.0, 0.0]]))
+    assert not mod.lies_on_itself(np.array([[0.0, 0.0], [30.0, 0.0], [30.0, 30.0]]))
+    short = np.concatenate([[[-4.0, 1.25]], nose, [[-4.0, -1.25]]])  # 4 m each side
+    assert not mod.lies_on_itself(short)
