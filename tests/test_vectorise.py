@@ -169,6 +169,7 @@ BAD_PARAMS: dict[str, Any] = {
     "ridge_curvature": -0.1,
     "ridge_classes": (0,),  # crossings are no lines
     "bend": 181.0,
+    "band": -1.0,
 }
 
 
@@ -204,8 +205,12 @@ def test_neighbouring_dividers_stay_apart() -> None:
     for p in got.points:
         assert np.ptp(p[:, 0]) > 30.0  # the whole line
         assert np.abs(p[:, 1] - p[:, 1].mean()).max() < 0.5  # straight
-    plain = vectorise(prob, HX, HY, VectoriseParams(ridge_classes=()))
+    plain = vectorise(prob, HX, HY, VectoriseParams(ridge_classes=(), band=0.0))
     assert sum(np.ptp(p[:, 0]) > 30.0 for p in plain.points) < 2
+    # the band rule (on for lines that are no ridge class) draws the blob's shrunk outline: both
+    # lines whole, though farther out than the ridge's (the blob's edges less the line radius)
+    banded = vectorise(prob, HX, HY, VectoriseParams(ridge_classes=()))
+    assert sum(np.ptp(p[:, 0]) > 30.0 for p in banded.points) == 2
     # lines well apart come out the same way with either rule
     far = _parallel_dividers(4.0, 0.8)
     for prm in (VectoriseParams(), VectoriseParams(ridge_classes=())):
@@ -463,6 +468,32 @@ def test_a_lane_line_is_cut_where_it_bends_sharply(cls: int) -> None:
     arc = np.stack([30 * np.sin(t) - 12, 30 * (1 - np.cos(t)) - 8], 1)  # (40, 2), 24 m
     curved = vectorise(_lines_prob([arc], 1), HX, HY, VectoriseParams(upsample=1))
     assert int((curved.classes == 1).sum()) == 1
+
+
+def test_a_band_of_two_kerbs_is_drawn_round_its_nose() -> None:
+    """A median island on 1.2 m cells: its two kerbs one band of boundary probability 4 cells (4.8
+    m) wide from ego x = 0 to the front edge. The skeleton runs down its middle; with the band rule
+    the boundary is its outline shrunk by the line radius (0.9 m): one line up one side, round the
+    nose and back, both ends at the front edge, about 3 m apart. A kerb one cell wide stays its
+    skeleton."""
+    prob = np.zeros((3, 50, 25), np.float32)
+    prob[2, 25:, 10:14] = 0.95  # x in [0, 30] m, y in [-3, 1.8] m
+    prob[2, :, 20] = 0.95  # a single kerb along y = 9 m
+    on = vectorise(prob, HX, HY)
+    off = vectorise(prob, HX, HY, VectoriseParams(band=0.0))
+    lines_on = [p.astype(np.float64) for c, p in zip(on.classes, on.points, strict=True) if c == 2]
+    lines_off = [
+        p.astype(np.float64) for c, p in zip(off.classes, off.points, strict=True) if c == 2
+    ]
+    kerb_on = [p for p in lines_on if p[:, 1].mean() > 6]
+    kerb_off = [p for p in lines_off if p[:, 1].mean() > 6]
+    np.testing.assert_array_equal(kerb_on, kerb_off)  # the single kerb untouched
+    (mid,) = [p for p in lines_off if p[:, 1].mean() < 6]
+    assert np.abs(mid[:, 1] - mid[:, 1].mean()).max() < 0.5  # one line down the middle
+    (u,) = [p for p in lines_on if p[:, 1].mean() < 6]
+    assert u[0, 0] > 27 and u[-1, 0] > 27  # both ends at the front edge
+    assert 2.0 < abs(u[0, 1] - u[-1, 1]) < 4.0  # one on either side
+    assert u[:, 0].min() < 3.0  # round the nose
 
 
 def test_through_and_spur_are_checked() -> None:

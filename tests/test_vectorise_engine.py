@@ -62,6 +62,8 @@ def test_same_instances_as_the_reference_on_recorded_masks() -> None:
         {"edge_margin": 3.0, "edge_span": 1.0},
         {"bend": 0.0},  # ridge lines not cut where they bend
         {"bend": 20.0, "min_length": 1.0},
+        {"band": 0.0},  # kerb bands kept as their skeletons
+        {"band": 1.1},
         {"hull_simplify": 0.0},  # minimum rotated rectangles
         {"shrink": 0.0},
         {"upsample": 3, "num_points": 7},

@@ -148,6 +148,7 @@ def vectorise(
     edge_margin: float = 1.5,
     edge_span: float = 3.0,
     bend: float = 45.0,
+    band: float = 1.8,
     parallel: bool = True,
 ) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.float32], npt.NDArray[np.float32]]:
     """Map instances of one frame from the segmentation's class probabilities (the vectoriser).
@@ -157,9 +158,10 @@ def vectorise(
     others open polylines. The settings are ``icmapper.models.vectorise.VectoriseParams``' (the
     Python ``vectorise`` passes them): bilinear upsampling, thresholds, the ridge mask of
     ``ridge_classes``, skeleton branches joined through junctions (``through`` degrees) with spurs
-    under ``spur`` metres dropped, simplified, ridge lines cut where they turn by more than
-    ``bend`` degrees, resampled to ``num_points``, ridge lines along the front or back edge of the
-    grid (``edge_margin``, ``edge_span``) dropped; crossing masks cut into one part per crossing,
+    under ``spur`` metres dropped (the kerbs of a band two kerbs wide, ``band``: its shrunk
+    outline's), simplified, ridge lines cut where they turn by more than ``bend`` degrees,
+    resampled to ``num_points``, ridge lines along the front or back edge of the grid
+    (``edge_margin``, ``edge_span``) dropped; crossing masks cut into one part per crossing,
     outlined and shrunk. ``parallel``: the classes at once on the engine's thread pool (same
     result). Returns ``(classes (N,) int64, scores (N,) float32 (mean probability of the
     instance's cells), points (N, num_points, 2) float32 ego metres)``, classes in index order.

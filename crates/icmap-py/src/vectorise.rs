@@ -24,7 +24,7 @@ type Instances<'py> = (
     shrink = 0.9, rectangularity = 0.6, corner_tolerance = 2.0, hull_simplify = 0.5,
     max_hole = 2.0, simplify = 0.2, through = 45.0, spur = 4.0, ridge_classes = vec![1],
     ridge_threshold = 0.3, ridge_sigma = 0.6, ridge_curvature = 0.22, num_points = 20,
-    edge_margin = 1.5, edge_span = 3.0, bend = 45.0, parallel = true
+    edge_margin = 1.5, edge_span = 3.0, bend = 45.0, band = 1.8, parallel = true
 ))]
 #[allow(clippy::too_many_arguments)]
 pub fn vectorise<'py>(
@@ -52,6 +52,7 @@ pub fn vectorise<'py>(
     edge_margin: f64,
     edge_span: f64,
     bend: f64,
+    band: f64,
     parallel: bool,
 ) -> PyResult<Instances<'py>> {
     let ridge_classes = ridge_classes
@@ -85,6 +86,7 @@ pub fn vectorise<'py>(
         edge_margin,
         edge_span,
         bend,
+        band,
     };
     let view = prob.as_array();
     let shape = [view.shape()[0], view.shape()[1], view.shape()[2]];

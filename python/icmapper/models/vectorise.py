@@ -24,6 +24,13 @@ from the masks instead (``model.instances = "segmentation"``):
   each piece scored as its whole line): a painted lane line curves gently, so such a corner is
   a skeleton that ran from one line across the lanes or into another (sim:val:32: divider pieces
   per true line 1.44 -> 1.33, docs/mapping.md, "Lane lines bend gently");
+- a band of kerb probability as wide as two kerbs (a median island's, merged on the coarse grid)
+  is drawn as its outline shrunk by the targets' line radius, not its skeleton (``band``: a
+  component whose skeleton lies farther than ``band * shrink`` from the mask's edge over at least
+  half its cells; the cells farther than ``shrink`` from the edge, those of them with a
+  4-neighbour inside the grid outside them, cut into branches as a skeleton is): a frame that sees
+  the island's nose gives one line round it, as the ground truth holds its kerb
+  (docs/mapping.md, "Kerbs round median islands");
 - a ridge line along the front or back edge of the grid is dropped (``edge_margin``,
   ``edge_span``): the ridge's Gaussian reads zeros past the grid, so lane lines entering or leaving
   the range leave a ridge across the lanes at the edge, one per frame, moving with the car
@@ -97,6 +104,9 @@ class VectoriseParams:
     edge_span: float = 3.0
     bend: float = 45.0  # degrees; a ridge-class line turning by more than this within
     # ``BEND_ARC`` metres on either side of a vertex is cut there (0: never)
+    band: float = 1.8  # a component of a line class that is not a ridge class (the kerbs) whose
+    # skeleton lies farther than ``band * shrink`` from its edge over at least half its cells is
+    # two kerbs merged (a median island): drawn as its outline shrunk by ``shrink`` (0: never)
 
     def __post_init__(self) -> None:
         if self.upsample < 1 or self.num_points < 2:
@@ -122,7 +132,7 @@ class VectoriseParams:
             raise ValueError(f"vectorise: shrink must be >= 0, got {self.shrink}")
         for key in ("min_length", "min_area", "simplify", "corner_tolerance", "max_hole",
                     "hull_simplify", "ridge_curvature", "through", "spur", "edge_margin",
-                    "edge_span"):  # fmt: skip
+                    "edge_span", "band"):  # fmt: skip
             if not getattr(self, key) >= 0:
                 raise ValueError(f"vectorise: {key} must be >= 0, got {getattr(self, key)}")
 

@@ -5,8 +5,9 @@ module outside tests and benchmarks.
 
 It is ``models/vectorise.py`` as it was before the port (commit 4c267ec), unchanged but for the
 function's name (``vectorise_reference``), the imports of the shared types and the rules added
-since in both (ridge lines along the front or back edge dropped, cut where they bend). What it
-does, step by step, is described in ``icmapper.models.vectorise`` and in the engine's module docs.
+since in both (ridge lines along the front or back edge dropped, cut where they bend; bands of
+two kerbs drawn as their outline). What it does, step by step, is described in
+``icmapper.models.vectorise`` and in the engine's module docs.
 
 Where the engine cannot agree with it exactly (both are deterministic; the differences are in the
 last bits of float32 arithmetic): torch's bilinear upsampling sums in float32 in an order that
@@ -361,6 +362,42 @@ def _vertex_cells(line: NDArray[np.float64], simple: NDArray[np.float64]) -> lis
     return at
 
 
+def _outline_bands(
+    mask: NDArray[np.bool_],
+    metres: Callable[[NDArray[np.int64]], NDArray[np.float64]],
+    branches: list[tuple[NDArray[np.int64], LineString]],
+    p: VectoriseParams,
+    cell: float,
+) -> list[tuple[NDArray[np.int64], LineString]]:
+    """The branches of a line class's ``mask`` with those of every band (a component whose
+    skeleton lies farther than ``band * shrink`` from its edge over at least half its cells)
+    replaced by the branches of its outline shrunk by ``shrink`` (kept branches first, then each
+    band's, bands in label order)."""
+    from scipy import ndimage
+
+    if p.band <= 0 or not branches:
+        return branches
+    dt = ndimage.distance_transform_edt(mask)  # cells
+    labels, n = ndimage.label(mask, _K8)
+    thick, total = np.zeros(n + 1, np.int64), np.zeros(n + 1, np.int64)
+    for path, _ in branches:
+        c = labels[path[0, 0], path[0, 1]]
+        total[c] += len(path)
+        thick[c] += int((dt[path[:, 0], path[:, 1]] * cell > p.band * p.shrink).sum())
+    band = (total > 0) & (2 * thick >= total)
+    out = [b for b in branches if not band[labels[b[0][0, 0], b[0][0, 1]]]]
+    for c in range(1, n + 1):
+        if not band[c]:
+            continue
+        inner = (labels == c) & (dt * cell > p.shrink)
+        pad = np.pad(inner, 1, constant_values=True)  # the grid's border is no edge
+        interior = pad[:-2, 1:-1] & pad[2:, 1:-1] & pad[1:-1, :-2] & pad[1:-1, 2:]
+        edge = inner & ~interior
+        if edge.any():
+            out.extend(_skeleton_branches(edge, metres, p.min_length, p.through, p.spur))
+    return out
+
+
 def vectorise_reference(
     prob: NDArray[np.floating],
     half_x: float,
@@ -427,7 +464,10 @@ def vectorise_reference(
                     scores.append(float(prob[k][cells[:, 0], cells[:, 1]].mean()))
                     points.append(resample_polyline(ring, p.num_points, closed=True))
             continue
-        for path, line in _skeleton_branches(mask, metres, p.min_length, p.through, p.spur):
+        lines = list(_skeleton_branches(mask, metres, p.min_length, p.through, p.spur))
+        if k not in p.ridge_classes:
+            lines = _outline_bands(mask, metres, lines, p, sx)
+        for path, line in lines:
             simple = np.asarray(line.simplify(p.simplify).coords, np.float64)
             ridge = k in p.ridge_classes
             spans = _cut_at_bends(simple, p.bend, p.min_length) if ridge else [(0, len(simple) - 1)]

@@ -16,6 +16,7 @@
 //! - [`hull`], [`buffer`], [`principal`]: convex hulls, mitre offsets and principal axes of cell
 //!   sets (GEOS / LAPACK semantics);
 //! - [`crossings`]: crossing components, cut into one part per crossing, and their outlines;
+//! - [`band`]: a band of two kerbs merged (a median island) drawn as its shrunk outline;
 //! - [`bend`]: ridge-class lines cut where they turn sharply (a lane line bends gently);
 //! - [`edge`]: ridge lines along the front and back edges of the grid (the zero padding's, not
 //!   a line's) dropped;
@@ -25,6 +26,7 @@
 //! the former Python implementation, which is the oracle of its tests. What it must not do: read
 //! files, know the network, or panic on any input (every failure is a [`GeomError`]).
 
+pub mod band;
 pub mod bend;
 pub mod branches;
 pub mod buffer;
@@ -100,6 +102,10 @@ pub struct VectoriseParams {
     /// Degrees; a ridge-class line turning by more than this within [`bend::BEND_ARC`] metres
     /// on either side of a vertex is cut there (0: never).
     pub bend: f64,
+    /// A component of a line class that is not a ridge class (the kerbs) whose skeleton lies
+    /// farther than `band` times `shrink` from its edge over at least half its cells is two kerbs
+    /// merged into one band (a median island): drawn as its outline shrunk by `shrink` (0: never).
+    pub band: f64,
 }
 
 impl Default for VectoriseParams {
@@ -125,6 +131,7 @@ impl Default for VectoriseParams {
             edge_margin: 1.5,
             edge_span: 3.0,
             bend: 45.0,
+            band: 1.8,
         }
     }
 }
@@ -199,6 +206,7 @@ impl VectoriseParams {
             ("spur", self.spur),
             ("edge_margin", self.edge_margin),
             ("edge_span", self.edge_span),
+            ("band", self.band),
         ] {
             // NaN fails too; +inf is allowed where Python allows it (it drops everything)
             if v.is_nan() || v < 0.0 {
@@ -511,7 +519,13 @@ pub fn vectorise_class(
         return out;
     }
     let ridge = p.ridge_classes.contains(&k);
-    for (path, line) in branches::skeleton_branches(&mask, frame, p.min_length, p.through, p.spur) {
+    let lines = branches::skeleton_branches(&mask, frame, p.min_length, p.through, p.spur);
+    let lines = if ridge {
+        lines
+    } else {
+        band::outline_bands(&mask, frame, lines, p)
+    };
+    for (path, line) in lines {
         let simple = simplify::simplify_line(&line, p.simplify);
         let spans = if ridge {
             bend::cut_at_bends(&simple, p.bend, p.min_length)

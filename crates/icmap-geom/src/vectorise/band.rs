@@ -1,0 +1,130 @@
+//! Two kerbs merged into one band of probability, drawn as its outline.
+//!
+//! A median island narrower than about 3 m puts its two kerbs within a BEV cell or two of each
+//! other: on 1.2 m cells the boundary probabilities of both sides are one band, and its skeleton
+//! runs down the middle of the island, a metre or more from either kerb (docs/mapping.md, "Kerbs
+//! round median islands"). A band is a connected component of the mask whose skeleton lies
+//! farther than `band` times the targets' line radius (`shrink`) from the mask's edge over at
+//! least half of its cells (one kerb's mask is about one radius wide on either side of its
+//! skeleton). Its lines are the outline of the band shrunk by the radius, as a crossing's outline
+//! is: the cells of the component farther than `shrink` from its edge, and of those the ones with
+//! a 4-neighbour inside the grid outside them (the grid's border is no edge: the band goes on
+//! past the range there), cut into ordered branches as a skeleton is. A frame that sees the
+//! island's nose gives one line round it, up one side and down the other, as the ground truth
+//! holds the island's kerb.
+
+use super::branches::skeleton_branches;
+use super::raster::{distance_transform, label8};
+use super::{Cell, Frame, Grid, VectoriseParams};
+use crate::types::Point;
+
+/// The skeleton branches `(cells, metres)` of a line class's `mask`, with those of every band
+/// replaced by the branches of its shrunk outline (kept branches first, in their order; then each
+/// band's outline branches, bands in label order). `params.band <= 0`: the branches as they are.
+pub fn outline_bands(
+    mask: &Grid<bool>,
+    frame: &Frame,
+    branches: Vec<(Vec<Cell>, Vec<Point>)>,
+    params: &VectoriseParams,
+) -> Vec<(Vec<Cell>, Vec<Point>)> {
+    if params.band <= 0.0 || branches.is_empty() {
+        return branches;
+    }
+    let dt = distance_transform(mask); // cells
+    let (labels, comps) = label8(mask);
+    let wide = params.band * params.shrink;
+    let (mut thick, mut total) = (vec![0usize; comps.len() + 1], vec![0usize; comps.len() + 1]);
+    for (path, _) in &branches {
+        let c = labels.at(path[0].0, path[0].1) as usize;
+        for &(i, j) in path {
+            total[c] += 1;
+            if dt.at(i, j) * frame.sx > wide {
+                thick[c] += 1;
+            }
+        }
+    }
+    let is_band = |c: usize| total[c] > 0 && 2 * thick[c] >= total[c];
+    let mut out: Vec<(Vec<Cell>, Vec<Point>)> = branches
+        .into_iter()
+        .filter(|(path, _)| !is_band(labels.at(path[0].0, path[0].1) as usize))
+        .collect();
+    for (c, cells) in comps.iter().enumerate().map(|(k, cells)| (k + 1, cells)) {
+        if !is_band(c) {
+            continue;
+        }
+        let mut inner = Grid::filled(mask.nx, mask.ny, false);
+        for &(i, j) in cells {
+            if dt.at(i, j) * frame.sx > params.shrink {
+                inner.set(i, j, true);
+            }
+        }
+        let mut edge = Grid::filled(mask.nx, mask.ny, false);
+        for &(i, j) in cells {
+            if !inner.at(i, j) {
+                continue;
+            }
+            let outside = (i > 0 && !inner.at(i - 1, j))
+                || (i + 1 < mask.nx && !inner.at(i + 1, j))
+                || (j > 0 && !inner.at(i, j - 1))
+                || (j + 1 < mask.ny && !inner.at(i, j + 1));
+            if outside {
+                edge.set(i, j, true);
+            }
+        }
+        if edge.any() {
+            out.extend(skeleton_branches(
+                &edge,
+                frame,
+                params.min_length,
+                params.through,
+                params.spur,
+            ));
+        }
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn params() -> VectoriseParams {
+        VectoriseParams::default()
+    }
+
+    /// A mask (200 x 100 cells of 0.3 m over 60 x 30 m) with rows `rows` set from column `x0` on.
+    fn band_mask(rows: std::ops::Range<usize>, x0: usize) -> Grid<bool> {
+        let mut g = Grid::filled(200, 100, false);
+        for i in x0..200 {
+            for j in rows.clone() {
+                g.set(i, j, true);
+            }
+        }
+        g
+    }
+
+    #[test]
+    fn a_thin_kerb_keeps_its_skeleton_and_a_band_becomes_its_outline() {
+        let frame = Frame::new(200, 100, 30.0, 15.0);
+        let p = params();
+        // one kerb: 6 cells (1.8 m) wide
+        let thin = band_mask(40..46, 0);
+        let b = skeleton_branches(&thin, &frame, p.min_length, p.through, p.spur);
+        assert_eq!(outline_bands(&thin, &frame, b.clone(), &p), b);
+        // an island's two kerbs merged: 14 cells (4.2 m) wide, its nose at x = 0 m
+        let wide = band_mask(40..54, 100);
+        let b = skeleton_branches(&wide, &frame, p.min_length, p.through, p.spur);
+        let out = outline_bands(&wide, &frame, b.clone(), &p);
+        assert_ne!(out, b);
+        // one line round the nose, its two ends at the far (x = 30 m) edge, 2.4 m apart
+        assert_eq!(out.len(), 1);
+        let line = &out[0].1;
+        let (a, z) = (line[0], line[line.len() - 1]);
+        assert!(a.x > 28.0 && z.x > 28.0, "{a:?} {z:?}");
+        assert!(((a.y - z.y).abs() - 2.4).abs() < 0.4, "{a:?} {z:?}");
+        assert!(line.iter().any(|q| q.x < 1.5));
+        // off
+        let off = VectoriseParams { band: 0.0, ..p };
+        assert_eq!(outline_bands(&wide, &frame, b.clone(), &off), b);
+    }
+}
