@@ -30,18 +30,28 @@ pub fn outline_bands(
     if params.band <= 0.0 || branches.is_empty() {
         return branches;
     }
+    let wide = params.band * params.shrink;
+    // thick skeleton cells per branch, by a scan of the disc of radius `wide` around each (the
+    // distance transform's `dt * sx > wide`, exactly; most frames have none and stop here)
+    let disc = disc_offsets(wide, frame.sx);
+    let thick_in: Vec<usize> = branches
+        .iter()
+        .map(|(path, _)| {
+            path.iter()
+                .filter(|&&c| is_thick(mask, c, &disc, wide))
+                .count()
+        })
+        .collect();
+    if thick_in.iter().all(|&n| n == 0) {
+        return branches;
+    }
     let dt = distance_transform(mask); // cells
     let (labels, comps) = label8(mask);
-    let wide = params.band * params.shrink;
     let (mut thick, mut total) = (vec![0usize; comps.len() + 1], vec![0usize; comps.len() + 1]);
-    for (path, _) in &branches {
+    for ((path, _), n) in branches.iter().zip(&thick_in) {
         let c = labels.at(path[0].0, path[0].1) as usize;
-        for &(i, j) in path {
-            total[c] += 1;
-            if dt.at(i, j) * frame.sx > wide {
-                thick[c] += 1;
-            }
-        }
+        total[c] += path.len();
+        thick[c] += n;
     }
     let is_band = |c: usize| total[c] > 0 && 2 * thick[c] >= total[c];
     let mut out: Vec<(Vec<Cell>, Vec<Point>)> = branches
@@ -82,6 +92,37 @@ pub fn outline_bands(
         }
     }
     out
+}
+
+/// The cell offsets `(di, dj, distance in metres)` within `wide` metres of a cell and the first
+/// one beyond it, nearest first (cells `sx` metres square).
+fn disc_offsets(wide: f64, sx: f64) -> Vec<(isize, isize, f64)> {
+    let r = (wide / sx).ceil() as isize + 1;
+    let mut out: Vec<(isize, isize, f64)> = (-r..=r)
+        .flat_map(|di| (-r..=r).map(move |dj| (di, dj)))
+        .map(|(di, dj)| (di, dj, ((di * di + dj * dj) as f64).sqrt() * sx))
+        .collect();
+    out.sort_by(|a, b| a.2.total_cmp(&b.2));
+    out
+}
+
+/// Whether set cell `c` of `mask` lies farther than `wide` metres from every unset cell of the
+/// grid (the distance transform's `dt * sx > wide`; cells past the grid's border do not count, as
+/// there), scanning `disc` (`disc_offsets(wide, sx)`) nearest first.
+fn is_thick(mask: &Grid<bool>, c: Cell, disc: &[(isize, isize, f64)], wide: f64) -> bool {
+    for &(di, dj, d) in disc {
+        if d > wide {
+            break;
+        }
+        let (i, j) = (c.0 as isize + di, c.1 as isize + dj);
+        if i < 0 || j < 0 || i >= mask.nx as isize || j >= mask.ny as isize {
+            continue;
+        }
+        if !mask.at(i as usize, j as usize) {
+            return false;
+        }
+    }
+    true
 }
 
 #[cfg(test)]
