@@ -8,6 +8,7 @@
 //! there: each side is a line of its own (shorter than the minimum length: dropped), scored by
 //! its own cells.
 
+use crate::resample::cumulative_lengths;
 use crate::types::Point;
 
 /// Metres of the line on either side of a vertex over which its turn is measured.
@@ -52,17 +53,6 @@ fn turn_at(line: &[Point], cum: &[f64], i: usize) -> f64 {
     (a.dot(&b) / (na * nb)).clamp(-1.0, 1.0).acos().to_degrees()
 }
 
-fn cumulative(line: &[Point]) -> Vec<f64> {
-    let mut cum = Vec::with_capacity(line.len());
-    let mut acc = 0.0;
-    cum.push(0.0);
-    for w in line.windows(2) {
-        acc += (w[1] - w[0]).norm();
-        cum.push(acc);
-    }
-    cum
-}
-
 /// The pieces of a polyline cut at every vertex where it turns by more than `bend` degrees
 /// (`bend <= 0`: never), as spans `(first, last)` of vertex indices (inclusive; pieces share
 /// their cut vertex, in order along the line): the sharpest such vertex first (the first of
@@ -83,7 +73,7 @@ fn cut_into(
     min_length: f64,
     out: &mut Vec<(usize, usize)>,
 ) {
-    let cum = cumulative(line);
+    let cum = cumulative_lengths(line);
     let mut best: Option<(usize, f64)> = None;
     if bend > 0.0 {
         for i in 1..line.len().saturating_sub(1) {
