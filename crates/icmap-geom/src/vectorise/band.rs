@@ -145,6 +145,38 @@ mod tests {
     }
 
     #[test]
+    fn the_disc_scan_is_the_distance_transforms_test() {
+        // random blobs on small grids, several radii: `is_thick` == `dt * sx > wide` everywhere
+        let mut rng = crate::splitmix::Rng(7);
+        for trial in 0..40 {
+            let (nx, ny) = (20 + trial % 7, 15 + trial % 5);
+            let mut g = Grid::filled(nx, ny, false);
+            for i in 0..nx {
+                for j in 0..ny {
+                    let (x, y) = (i as f64 - nx as f64 / 2.0, j as f64 - ny as f64 / 2.0);
+                    g.set(i, j, x * x + 0.5 * y * y < 40.0 || rng.next() < 0.6);
+                }
+            }
+            let dt = distance_transform(&g);
+            for wide in [0.3, 0.9, 1.62, 2.5] {
+                let sx = 0.3;
+                let disc = disc_offsets(wide, sx);
+                for (i, j) in g.cells() {
+                    assert_eq!(
+                        is_thick(&g, (i, j), &disc, wide),
+                        dt.at(i, j) * sx > wide,
+                        "trial {trial} wide {wide} cell ({i}, {j})"
+                    );
+                }
+            }
+        }
+        // a grid with no unset cell: infinitely far from one, as the transform has it
+        let full = Grid::filled(6, 4, true);
+        assert!(distance_transform(&full).at(2, 2).is_infinite());
+        assert!(is_thick(&full, (2, 2), &disc_offsets(1.62, 0.3), 1.62));
+    }
+
+    #[test]
     fn a_thin_kerb_keeps_its_skeleton_and_a_band_becomes_its_outline() {
         let frame = Frame::new(200, 100, 30.0, 15.0);
         let p = params();
