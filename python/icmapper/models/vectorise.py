@@ -21,7 +21,7 @@ from the masks instead (``model.instances = "segmentation"``):
   ``min_length`` metres are dropped;
 - a ridge line is cut where it bends sharply (``bend``, 45 degrees, measured over ``BEND_ARC``,
   1.5 m, on either side of a vertex of the simplified line; pieces under ``min_length`` dropped,
-  each piece scored as its whole line): a painted lane line curves gently, so such a corner is
+  each piece scored by its own cells): a painted lane line curves gently, so such a corner is
   a skeleton that ran from one line across the lanes or into another (sim:val:32: divider pieces
   per true line 1.44 -> 1.33, docs/mapping.md, "Lane lines bend gently");
 - a band of kerb probability as wide as two kerbs (a median island's, merged on the coarse grid)
