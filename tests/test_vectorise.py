@@ -494,6 +494,10 @@ def test_a_band_of_two_kerbs_is_drawn_round_its_nose() -> None:
     assert u[0, 0] > 27 and u[-1, 0] > 27  # both ends at the front edge
     assert 2.0 < abs(u[0, 1] - u[-1, 1]) < 4.0  # one on either side
     assert u[:, 0].min() < 3.0  # round the nose
+    # a huge or infinite band (no band at all) keeps the skeleton, in bounded time and memory
+    for huge in (1e6, float("inf")):
+        big = vectorise(prob, HX, HY, VectoriseParams(band=huge))
+        np.testing.assert_array_equal(big.points, off.points)
 
 
 def test_through_and_spur_are_checked() -> None:

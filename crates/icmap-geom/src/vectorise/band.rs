@@ -33,7 +33,7 @@ pub fn outline_bands(
     let wide = params.band * params.shrink;
     // thick skeleton cells per branch, by a scan of the disc of radius `wide` around each (the
     // distance transform's `dt * sx > wide`, exactly; most frames have none and stop here)
-    let disc = disc_offsets(wide, frame.sx);
+    let disc = disc_offsets(wide, frame.sx, mask.nx.max(mask.ny));
     let thick_in: Vec<usize> = branches
         .iter()
         .map(|(path, _)| {
@@ -95,9 +95,11 @@ pub fn outline_bands(
 }
 
 /// The cell offsets `(di, dj, distance in metres)` within `wide` metres of a cell and the first
-/// one beyond it, nearest first (cells `sx` metres square).
-fn disc_offsets(wide: f64, sx: f64) -> Vec<(isize, isize, f64)> {
-    let r = (wide / sx).ceil() as isize + 1;
+/// one beyond it, nearest first (cells `sx` metres square), at most `extent` cells out: no offset
+/// farther reaches another cell of a grid `extent` cells across, so a huge or infinite `wide`
+/// costs no more than the grid.
+fn disc_offsets(wide: f64, sx: f64, extent: usize) -> Vec<(isize, isize, f64)> {
+    let r = (wide / sx).ceil().min(extent as f64) as isize + 1;
     let mut out: Vec<(isize, isize, f64)> = (-r..=r)
         .flat_map(|di| (-r..=r).map(move |dj| (di, dj)))
         .map(|(di, dj)| (di, dj, ((di * di + dj * dj) as f64).sqrt() * sx))
@@ -108,7 +110,7 @@ fn disc_offsets(wide: f64, sx: f64) -> Vec<(isize, isize, f64)> {
 
 /// Whether set cell `c` of `mask` lies farther than `wide` metres from every unset cell of the
 /// grid (the distance transform's `dt * sx > wide`; cells past the grid's border do not count, as
-/// there), scanning `disc` (`disc_offsets(wide, sx)`) nearest first.
+/// there), scanning `disc` (`disc_offsets(wide, sx, extent)`) nearest first.
 fn is_thick(mask: &Grid<bool>, c: Cell, disc: &[(isize, isize, f64)], wide: f64) -> bool {
     for &(di, dj, d) in disc {
         if d > wide {
@@ -160,7 +162,7 @@ mod tests {
             let dt = distance_transform(&g);
             for wide in [0.3, 0.9, 1.62, 2.5] {
                 let sx = 0.3;
-                let disc = disc_offsets(wide, sx);
+                let disc = disc_offsets(wide, sx, nx.max(ny));
                 for (i, j) in g.cells() {
                     assert_eq!(
                         is_thick(&g, (i, j), &disc, wide),
@@ -173,7 +175,16 @@ mod tests {
         // a grid with no unset cell: infinitely far from one, as the transform has it
         let full = Grid::filled(6, 4, true);
         assert!(distance_transform(&full).at(2, 2).is_infinite());
-        assert!(is_thick(&full, (2, 2), &disc_offsets(1.62, 0.3), 1.62));
+        assert!(is_thick(&full, (2, 2), &disc_offsets(1.62, 0.3, 6), 1.62));
+        // a huge or infinite radius scans no farther than the grid
+        let mut g = Grid::filled(8, 5, true);
+        g.set(0, 0, false);
+        for wide in [1e9, f64::INFINITY] {
+            let disc = disc_offsets(wide, 0.3, 8);
+            assert!(disc.len() <= 19 * 19);
+            assert!(!is_thick(&g, (7, 4), &disc, wide));
+            assert!(is_thick(&full, (3, 2), &disc_offsets(wide, 0.3, 6), wide));
+        }
     }
 
     #[test]
