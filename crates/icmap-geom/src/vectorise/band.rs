@@ -31,6 +31,9 @@ pub fn outline_bands(
         return branches;
     }
     let wide = params.band * params.shrink;
+    if wide.is_nan() {
+        return branches; // an infinite band of no width: no cell is farther than NaN
+    }
     // thick skeleton cells per branch, by a scan of the disc of radius `wide` around each (the
     // distance transform's `dt * sx > wide`, exactly; most frames have none and stop here)
     let disc = disc_offsets(wide, frame.sx, mask.nx.max(mask.ny));
