@@ -75,6 +75,18 @@ def test_from_checkpoint_takes_the_fusion_networks_history(tiny_checkpoint: Path
     assert Mapper.from_checkpoint(tiny_checkpoint, config=cfg).config.min_hits == 4
 
 
+@pytest.mark.parametrize("name", ["use_fusion", "use_association"])
+def test_config_switches_a_network_off(name: str, tiny_checkpoint: Path) -> None:
+    """Regression: ``--set use_fusion=false`` (docs/mapping.md's example) was overwritten by the
+    variant's flags, so the learned mapper fused all the same."""
+    off = Mapper.from_checkpoint(tiny_checkpoint, config=MapperConfig(**{name: False}))
+    assert getattr(off.config, name) is False
+    assert getattr(Mapper.from_checkpoint(tiny_checkpoint).config, name) is True
+    # the variant still switches it off whatever the config says
+    base = Mapper.from_checkpoint(tiny_checkpoint, config=MapperConfig(), variant="base")
+    assert getattr(base.config, name) is False
+
+
 def test_checkpoint_carries_mapper_settings(tiny_checkpoint: Path, tmp_path: Path) -> None:
     """The training config's [mapper] table travels in the checkpoint and is the mapper's
     starting point (configs/small.toml sets min_hits = 1, reid_alias = false, assoc_threshold =

@@ -143,7 +143,8 @@ class Mapper:
         "single-frame" (like "base" without temporal memory: MapTR-like). Without a config the
         detection threshold and the ``[mapper]`` settings are the checkpoint's;
         ``fusion_margin`` and ``history_points`` always come from the fusion network (a config
-        that sets other values raises ValueError).
+        that sets other values raises ValueError). The learned association and fusion run when
+        both the variant and the config use them.
         """
         from icmapper.models.network import load_network
 
@@ -154,8 +155,9 @@ class Mapper:
         cfg = config or MapperConfig.for_checkpoint(str(path))
         cfg = replace(
             network_settings(cfg, loaded.model.fusion_margin, loaded.model.fusion_history_points),
-            use_association=v.use_association,
-            use_fusion=v.use_fusion,
+            # a variant switches a network off; so does the config (`--set use_fusion=false`)
+            use_association=v.use_association and cfg.use_association,
+            use_fusion=v.use_fusion and cfg.use_fusion,
         )
         name = "icmapper" if variant == "full" else f"icmapper-{variant}"
         return cls(
