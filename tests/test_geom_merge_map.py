@@ -568,14 +568,15 @@ def test_merge_map_loses_and_invents_no_polyline(
     """Regression (issue 16, AV2 city map): the curve-fit merge of two long boundaries that
     overlap only in part dropped whole sides (CD_bound 0.72 m on 6 AV2 drives). Every input
     vertex lies within the tolerance of the merged map and every merged vertex within it of the
-    inputs (shapely distances); an unchecked merge (a tolerance too large to refuse) does not."""
+    inputs (shapely distances); an unchecked merge (a tolerance and a gate too large to refuse:
+    the gate bounds what a merge may leave farther than it) does not."""
     a, b = _dense(first), _dense(second)
 
-    def gaps(tolerance: float) -> tuple[float, float]:
+    def gaps(tolerance: float, gate: float = 1.5) -> tuple[float, float]:
         m, o = GlobalMap(), GlobalMap()
         m.insert(2, a)
         o.insert(2, b)
-        m.merge_map(o, tolerance=tolerance)
+        m.merge_map(o, gate=gate, tolerance=tolerance)
         out = MultiLineString([m.get(int(i))[1] for i in m.ids()])
         inputs = MultiLineString([a, b])
         lost = max(out.distance(Point(q)) for q in np.concatenate([a, b]))
@@ -584,4 +585,4 @@ def test_merge_map_loses_and_invents_no_polyline(
 
     lost, invented = gaps(3.0)
     assert lost <= 3.0 and invented <= 3.0, (lost, invented)
-    assert max(gaps(1e9)) > 6.0
+    assert max(gaps(1e9, 1e9)) > 6.0

@@ -284,7 +284,9 @@ class GlobalMap:
         and spacing) for polylines, polygon union for crossings. A polyline merge is kept only
         when every vertex of both members lies within ``tolerance`` metres of the result and
         every vertex of the result within ``tolerance`` of a member (nothing lost, nothing
-        invented such as a jump between far-apart pieces); the merge of the second into the
+        invented such as a jump between far-apart pieces), and at most 6 m of either member
+        lies farther than ``gate`` from it (the two sides of a median island, overlapping within
+        the gate, are not merged into one line); the merge of the second into the
         first is tried, then of the first into the second; if neither holds, the member is left
         out of the group (an instance of this map stays as it was, one of ``other`` is
         inserted). The group keeps the lowest id of its
@@ -310,7 +312,8 @@ class GlobalMap:
         two shares of points within ``gate`` metres of the other, at least ``min_overlap``)
         becomes part of it. Of a pair the instance with more points keeps its id (ties: the
         lower id) and takes the other's geometry by ``merge_map``'s class rule (a polyline merge
-        only when faithful within ``tolerance``, crossings by union); observations add up,
+        only when faithful within ``tolerance`` and ``gate``, crossings by union); observations
+        add up,
         frames span both, drives are the union; the other is removed. Neighbours are tried by
         larger share, smaller mean distance, lower id; a keeper is checked again. Returns the
         ``(absorbed, into)`` pairs in the order they happened (follow chains). Deterministic.

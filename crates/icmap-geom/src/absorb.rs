@@ -17,7 +17,8 @@
 //!    Candidates are tried by larger share, then smaller mean distance, then lower id.
 //! 3. **Merge**: of the pair, the instance with more points keeps its id (ties: the lower id)
 //!    and takes the other's geometry by the class rule of `merge_map` (a polyline merge only
-//!    when it is faithful within `tolerance`, a crossing by polygon union); observations add up,
+//!    when it is faithful within `tolerance` and the gate, a crossing by polygon union);
+//!    observations add up,
 //!    first / last frames span both, drives are the union. The other instance is removed. A pair
 //!    whose merge fails stays apart (and is not tried again in this call).
 //! 4. The keeper is checked again (it may now overlap another instance).
@@ -76,7 +77,7 @@ impl GlobalMap {
 
     /// Joins instance `a` and `b` (see the module docs, step 3): `Some((absorbed, into))`, or
     /// `None` when their merge fails (the map is then unchanged).
-    fn join(&mut self, a: u64, b: u64, tolerance: f64) -> Result<Option<(u64, u64)>> {
+    fn join(&mut self, a: u64, b: u64, params: &MergeMapParams) -> Result<Option<(u64, u64)>> {
         let (ia, ib) = match (self.get(a), self.get(b)) {
             (Some(x), Some(y)) => (x, y),
             _ => return Ok(None),
@@ -88,8 +89,7 @@ impl GlobalMap {
                 (ia, ib)
             };
         let config = self.config();
-        let Ok(points) =
-            merge_geometry(keep.closed, &keep.points, &gone.points, &config, tolerance)
+        let Ok(points) = merge_geometry(keep.closed, &keep.points, &gone.points, &config, params)
         else {
             return Ok(None);
         };
@@ -119,7 +119,7 @@ impl GlobalMap {
         let mut queue: VecDeque<u64> = ids.iter().copied().collect();
         while let Some(id) = queue.pop_front() {
             for k in self.overlapping(id, &params, &failed) {
-                match self.join(id, k, params.tolerance)? {
+                match self.join(id, k, &params)? {
                     Some((gone, into)) => {
                         out.push((gone, into));
                         queue.push_back(into);
