@@ -13,7 +13,9 @@ how many true instances have a match within 0.5, 1.0 and 1.5 m first (an upper b
 recall at each threshold: matches are one-to-one there), and the same for the true lines that
 lie on themselves (column U: a kerb around a median island, one instance up one side, round the
 nose and down the other; within ``U_GAP`` metres of itself over more than ``U_LENGTH`` metres,
-counting samples more than ``U_APART`` metres apart along it).
+counting samples more than ``U_APART`` metres apart along it). Then how far the true lines lie
+from the map, U and the others apart: the mean distance of their samples to the nearest map line
+of the class (the coverage half of the class's CD, pooled over the drives, ``coverage``).
 
     .venv/bin/python scripts/diagnose_gap.py --source sim:val:12 --maps /tmp/maps/icmapper --cls 2
 """
@@ -48,6 +50,19 @@ def lies_on_itself(points: np.ndarray) -> bool:
     return 0.5 * on_itself > U_LENGTH
 
 
+def coverage(truth: np.ndarray, lines: list[np.ndarray]) -> np.ndarray:
+    """Distance (n,) from each sample of a true polyline (m, 2), sampled as the CD samples it,
+    to the nearest sample of the map's ``lines`` (each (k, 2)); infinite without lines."""
+    from icmapper.eval.globalmap import dense_sample
+    from scipy.spatial import cKDTree
+
+    q = dense_sample(np.asarray(truth, np.float64), False)
+    if not lines:
+        return np.full(len(q), np.inf)
+    pts = np.concatenate([dense_sample(np.asarray(x, np.float64), False) for x in lines])
+    return cKDTree(pts).query(q)[0]
+
+
 def main(argv: list[str] | None = None) -> int:
     from icmapper.data import gt as gt_mod
     from icmapper.data.sources import open_source
@@ -64,6 +79,7 @@ def main(argv: list[str] | None = None) -> int:
     if a.cls not in (0, 1, 2):
         raise SystemExit(f"--cls must be 0, 1 or 2, got {a.cls}")
     rows = []
+    cover: dict[bool, list[np.ndarray]] = {True: [], False: []}  # lies on itself -> distances
     preds_of: dict[str, list] = {}  # drive -> its map's instances of the class
     for seq in open_source(a.source, render=False):
         path = Path(a.maps) / f"{seq.name}.icmap"
@@ -84,12 +100,20 @@ def main(argv: list[str] | None = None) -> int:
                     best = (0.5 * (to_map + to_true), to_map, to_true, k)
             u = not g.closed and lies_on_itself(g.points)
             rows.append((seq.name, length, *best, u))
+            cover[u].append(coverage(g.points, [p[1] for p in preds]))
     rows.sort(key=lambda r: -r[2])
     name = CLASS_NAMES[a.cls]
     for what, sel in (("", rows), (" lying on themselves (U)", [r for r in rows if r[6]])):
         print(
             f"{len(sel)} true {name} instances{what}; nearest map instance within 0.5 / 1.0 / "
             "1.5 m: " + " / ".join(str(sum(r[2] <= t for r in sel)) for t in (0.5, 1.0, 1.5))
+        )
+    for what, u in (("lying on themselves (U)", True), ("the others", False)):
+        d = np.concatenate(cover[u]) if cover[u] else np.zeros(0)
+        print(
+            f"true {name} instances {what}: their samples lie {d.mean() if len(d) else np.nan:.3f}"
+            f" m from the map on average ({len(d)} samples, {np.mean(d > 1.0) if len(d) else 0:.1%}"
+            " farther than 1 m)"
         )
     print(
         "| drive | true length m | U | Chamfer m | true to map | map to true | map length m | obs |"

@@ -83,3 +83,9 @@ def test_diagnose_gap_finds_a_kerb_round_an_island() -> None:
     assert not mod.lies_on_itself(np.array([[0.0, 0.0], [30.0, 0.0], [30.0, 30.0]]))
     short = np.concatenate([[[-4.0, 1.25]], nose, [[-4.0, -1.25]]])  # 4 m each side
     assert not mod.lies_on_itself(short)
+    # coverage: a map holding one side of the island leaves the other side 2.5 m off
+    side = np.array([[-30.0, -1.25], [0.0, -1.25]])
+    d = mod.coverage(island, [side])
+    assert d.min() < 1e-9 and 2.4 < d.max() < 2.6  # sample to sample
+    np.testing.assert_allclose(mod.coverage(side, [side]), 0.0, atol=1e-9)
+    assert np.isinf(mod.coverage(side, [])).all()
