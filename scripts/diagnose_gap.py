@@ -50,16 +50,17 @@ def lies_on_itself(points: np.ndarray) -> bool:
     return 0.5 * on_itself > U_LENGTH
 
 
-def coverage(truth: np.ndarray, lines: list[np.ndarray]) -> np.ndarray:
-    """Distance (n,) from each sample of a true polyline (m, 2), sampled as the CD samples it,
-    to the nearest sample of the map's ``lines`` (each (k, 2)); infinite without lines."""
+def coverage(truth: np.ndarray, lines: list[np.ndarray], closed: bool = False) -> np.ndarray:
+    """Distance (n,) from each sample of a true polyline (m, 2) (a ring when ``closed``: a
+    crossing), sampled as the CD samples it, to the nearest sample of the map's ``lines`` (each
+    (k, 2), of the same kind); infinite without lines."""
     from icmapper.eval.globalmap import dense_sample
     from scipy.spatial import cKDTree
 
-    q = dense_sample(np.asarray(truth, np.float64), False)
+    q = dense_sample(np.asarray(truth, np.float64), closed)
     if not lines:
         return np.full(len(q), np.inf)
-    pts = np.concatenate([dense_sample(np.asarray(x, np.float64), False) for x in lines])
+    pts = np.concatenate([dense_sample(np.asarray(x, np.float64), closed) for x in lines])
     return cKDTree(pts).query(q)[0]
 
 
@@ -100,7 +101,7 @@ def main(argv: list[str] | None = None) -> int:
                     best = (0.5 * (to_map + to_true), to_map, to_true, k)
             u = not g.closed and lies_on_itself(g.points)
             rows.append((seq.name, length, *best, u))
-            cover[u].append(coverage(g.points, [p[1] for p in preds]))
+            cover[u].append(coverage(g.points, [p[1] for p in preds], bool(g.closed)))
     rows.sort(key=lambda r: -r[2])
     name = CLASS_NAMES[a.cls]
     for what, sel in (("", rows), (" lying on themselves (U)", [r for r in rows if r[6]])):

@@ -313,11 +313,10 @@ class GlobalMap:
         becomes part of it. Of a pair the instance with more points keeps its id (ties: the
         lower id) and takes the other's geometry by ``merge_map``'s class rule (a polyline merge
         only when faithful within ``tolerance`` and ``gate``, crossings by union); observations
-        add up,
-        frames span both, drives are the union; the other is removed. Neighbours are tried by
-        larger share, smaller mean distance, lower id; a keeper is checked again. Returns the
-        ``(absorbed, into)`` pairs in the order they happened (follow chains). Deterministic.
-        ValueError for bad parameters (as ``merge_map``); the GIL is released."""
+        add up, frames span both, drives are the union; the other is removed. Neighbours are
+        tried by larger share, smaller mean distance, lower id; a keeper is checked again.
+        Returns the ``(absorbed, into)`` pairs in the order they happened (follow chains).
+        Deterministic. ValueError for bad parameters (as ``merge_map``); the GIL is released."""
 
     def ids(self) -> npt.NDArray[np.uint64]:
         """All instance ids, ascending: (k,) uint64."""

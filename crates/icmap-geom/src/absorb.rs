@@ -18,9 +18,9 @@
 //! 3. **Merge**: of the pair, the instance with more points keeps its id (ties: the lower id)
 //!    and takes the other's geometry by the class rule of `merge_map` (a polyline merge only
 //!    when it is faithful within `tolerance` and the gate, a crossing by polygon union);
-//!    observations add up,
-//!    first / last frames span both, drives are the union. The other instance is removed. A pair
-//!    whose merge fails stays apart (and is not tried again in this call).
+//!    observations add up, first / last frames span both, drives are the union. The other
+//!    instance is removed. A pair whose merge fails stays apart (and is not tried again in this
+//!    call).
 //! 4. The keeper is checked again (it may now overlap another instance).
 //!
 //! Returns the `(absorbed, into)` pairs in the order they happened (an id absorbed into one that

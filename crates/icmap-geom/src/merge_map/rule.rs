@@ -88,7 +88,8 @@ pub(super) fn merge_group(
 /// result: a hook or a spur that the fit smooths away. Two sides of a median island 2-3 m apart,
 /// found to overlap within the kerbs' gate and merged into one line, lost one side over its
 /// length, and the tolerance (3 m) let that pass (sim:val:32: the islands' kerbs were covered
-/// 0.56 m on average, the other kerbs 0.40 m; docs/mapping.md, "Kerbs round median islands").
+/// 0.56 m on average, the other kerbs 0.40 m; docs/mapping.md, "A merge keeps both sides of an
+/// island").
 pub const LOST_SLACK: f64 = 6.0;
 
 /// Whether every vertex of `pts` lies within `tol` of `outline`.
@@ -158,7 +159,8 @@ pub(crate) fn merge_geometry(
     Err(GeomError::Degenerate {
         what: "polyline merge".into(),
         reason: format!(
-            "no merge keeps both polylines within {} m, and within {} m but {LOST_SLACK} m",
+            "no merge keeps both polylines within {} m with at most {LOST_SLACK} m of either \
+             farther than {} m",
             params.tolerance, params.gate
         ),
     })
