@@ -149,6 +149,27 @@ def test_noisy_cut_views_do_not_widen_a_crossing() -> None:
     assert _area(maps["union"].get(3)[1]) > 1.5 * 40.0
 
 
+def test_a_partial_view_inside_the_range_does_not_replace_a_crossing() -> None:
+    """A far crosswalk built from cut views (12 x 4 m) and then seen inside the range only in part
+    (3 x 4 m of its middle, under ``PARTIAL_AREA`` of it): the partial view is handled as a cut
+    one, so the crossing is kept; a view of most of it (10 x 4 m) is complete and replaces it;
+    once seen whole, a partial view does not shrink the average."""
+    gm = GlobalMap(smoothing=0.5, spacing=1.0)
+    rule = CrossingMerger("average", RANGE_60x30)
+    built = _rect(20.0, 10.0, 12, 4, 60)
+    gm.insert_with_id(1, 0, built, frame=0)
+    rule.inserted(1, built + [0.0, 5.0])  # ego y 13..17: cut by the side of the range
+    assert rule.counts == {1: 0}
+    middle = _rect(20.0, 10.0, 3, 4, 40)
+    assert not rule.merge(gm, 1, middle, middle - [10.0, 0.0], 1)  # inside the range, partial
+    assert _ring_distance(gm.get(1)[1], built) < 0.05 and rule.counts == {1: 0}
+    most = _rect(20.5, 10.0, 10, 4, 60)
+    assert rule.merge(gm, 1, most, most - [10.0, 0.0], 2)  # 10 / 12 of it: complete
+    assert _ring_distance(gm.get(1)[1], most) < 0.05 and rule.counts == {1: 1}
+    assert not rule.merge(gm, 1, middle, middle - [10.0, 0.0], 3)
+    assert _ring_distance(gm.get(1)[1], most) < 0.05 and rule.counts == {1: 1}
+
+
 def test_a_collapsed_view_is_left_out() -> None:
     """A complete view enclosing (almost) no area does not replace or move the crossing; a
     crossing inserted from such a view is replaced by the first good complete view."""

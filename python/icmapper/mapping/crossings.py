@@ -10,6 +10,10 @@ them better (validation drives: CD_ped 1.24 m against 1.13 m).
 the range (every point at least ``EDGE_MARGIN`` metres from its edge) is a *complete* view; any
 other is *cut* by the range edge.
 
+- A view inside the range that encloses less than ``PARTIAL_AREA`` of the stored crossing's area
+  is a *partial* detection (the detector saw part of a far crosswalk) and counts as cut: on the
+  real intersections of av2-mini such views replaced a crosswalk built from cut views by a blob
+  of its middle.
 - Complete views are averaged: the first replaces what cut views built, and the stored ring is
   the running mean of the complete views since. Both rings are resampled to ``RING_POINTS`` points
   along the contour (dense enough that resampling again and again rounds a corner by less than
@@ -54,6 +58,9 @@ RING_POINTS = 160
 REVEAL_FRACTION = 0.5
 #: Square metres: a view enclosing less is degenerate (a collapsed ring) and is left out.
 MIN_VIEW_AREA = 1.0
+#: Share of the stored crossing's area under which a view inside the range is a partial
+#: detection, handled as a cut view (docs/mapping.md, "Crossings seen in part").
+PARTIAL_AREA = 0.5
 #: Square metres a view cut by the range edge must enclose for a new crossing to enter the map
 #: on its first sighting (``MapperConfig.confirm_score``): a crosswalk is about 3 x 8 m; a
 #: smaller cut view may be the corner of a neighbouring one (real intersections: a sliver taken
@@ -167,9 +174,9 @@ class CrossingMerger:
     ) -> bool:
         """Merges one observation, ``world`` (n, 2) world frame and the same points in the ego
         frame ``ego`` (n, 2), into instance ``target``. Returns False when the rule leaves the view
-        out (a view cut by the range edge that reveals nothing, or one enclosing less than
-        ``MIN_VIEW_AREA``; the map is unchanged). KeyError for an unknown id, ValueError for bad
-        geometry (the instance is unchanged)."""
+        out (a view cut by the range edge or partial that reveals nothing, or one enclosing less
+        than ``MIN_VIEW_AREA``; the map is unchanged). KeyError for an unknown id, ValueError for
+        bad geometry (the instance is unchanged)."""
         if self.rule == "union":
             global_map.merge(target, world, frame)
             return True
@@ -183,9 +190,11 @@ class CrossingMerger:
                 raise ValueError(f"crossing view ({name}) has NaN or inf points")
         if ego_pts.shape != pts.shape:
             raise ValueError(f"crossing view: world {pts.shape} and ego {ego_pts.shape} differ")
-        if abs(signed_ring_area(pts)) < MIN_VIEW_AREA:
+        area = abs(signed_ring_area(pts))
+        if area < MIN_VIEW_AREA:
             return False  # a collapsed ring: no view of a crossing
-        if is_complete(ego_pts, self.rng):
+        stored_area = abs(signed_ring_area(np.asarray(stored, dtype=np.float64)))
+        if is_complete(ego_pts, self.rng) and area >= PARTIAL_AREA * stored_area:
             new = pts if seen == 0 else average_rings(stored, pts, 1.0 / (seen + 1))
             global_map.replace(target, new, frame)
             self._counts[int(target)] = seen + 1
