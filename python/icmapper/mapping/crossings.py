@@ -193,8 +193,9 @@ class CrossingMerger:
         area = abs(signed_ring_area(pts))
         if area < MIN_VIEW_AREA:
             return False  # a collapsed ring: no view of a crossing
-        stored_area = abs(signed_ring_area(np.asarray(stored, dtype=np.float64)))
-        if is_complete(ego_pts, self.rng) and area >= PARTIAL_AREA * stored_area:
+        if is_complete(ego_pts, self.rng) and area >= PARTIAL_AREA * abs(
+            signed_ring_area(np.asarray(stored, dtype=np.float64))
+        ):  # seen whole, not in part
             new = pts if seen == 0 else average_rings(stored, pts, 1.0 / (seen + 1))
             global_map.replace(target, new, frame)
             self._counts[int(target)] = seen + 1

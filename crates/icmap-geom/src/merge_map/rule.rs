@@ -92,22 +92,21 @@ pub(super) fn merge_group(
 /// island").
 pub const LOST_SLACK: f64 = 6.0;
 
-/// Whether every vertex of `pts` lies within `tol` of `outline`.
-fn within(pts: &[Point], outline: &Outline<'_>, tol: f64) -> bool {
+/// The distance (metres) of each vertex of `pts` to `outline`; `None` farther than `cutoff`.
+fn distances(pts: &[Point], outline: &Outline<'_>, cutoff: f64) -> Vec<Option<f64>> {
     pts.iter()
-        .all(|p| outline.distance_within(p, tol).is_some())
+        .map(|p| outline.distance_within(p, cutoff))
+        .collect()
 }
 
-/// The length (metres) of the stretches of the polyline `pts` farther than `gate` from
-/// `outline`: its segments with an end farther than that.
-fn lost_length(pts: &[Point], outline: &Outline<'_>, gate: f64) -> f64 {
-    let off: Vec<bool> = pts
-        .iter()
-        .map(|p| outline.distance_within(p, gate).is_none())
-        .collect();
+/// The length (metres) of the stretches of the polyline `pts` farther than `gate` from a line,
+/// given its vertices' distances `dist` to it (`None`: farther than any gate): its segments with
+/// an end farther than that.
+fn lost_length(pts: &[Point], dist: &[Option<f64>], gate: f64) -> f64 {
+    let off = |d: &Option<f64>| d.is_none_or(|d| d > gate);
     pts.windows(2)
-        .zip(off.windows(2))
-        .filter(|(_, o)| o[0] || o[1])
+        .zip(dist.windows(2))
+        .filter(|(_, d)| off(&d[0]) || off(&d[1]))
         .map(|(w, _)| (w[1] - w[0]).norm())
         .sum()
 }
@@ -115,7 +114,7 @@ fn lost_length(pts: &[Point], outline: &Outline<'_>, gate: f64) -> f64 {
 /// Whether `merged` is a faithful merge of the polylines `a` and `b`: every vertex of `a` and
 /// `b` within the tolerance of it, every vertex of it within the tolerance of `a` or `b`, and at
 /// most [`LOST_SLACK`] metres of either farther than the gate from it (what was found to overlap
-/// within the gate stays within it).
+/// within the gate stays within it). Each vertex's distance is measured once.
 fn faithful(merged: &[Point], a: &[Point], b: &[Point], params: &MergeMapParams) -> bool {
     let tol = params.tolerance;
     let (om, oa, ob) = (
@@ -123,13 +122,16 @@ fn faithful(merged: &[Point], a: &[Point], b: &[Point], params: &MergeMapParams)
         Outline::of(a, false),
         Outline::of(b, false),
     );
-    within(a, &om, tol)
-        && within(b, &om, tol)
+    // every vertex within the tolerance, and at most the slack of it beyond the gate
+    let kept = |pts: &[Point]| {
+        let d = distances(pts, &om, tol);
+        d.iter().all(Option::is_some) && lost_length(pts, &d, params.gate) <= LOST_SLACK
+    };
+    kept(a)
+        && kept(b)
         && merged
             .iter()
             .all(|p| oa.distance_within(p, tol).is_some() || ob.distance_within(p, tol).is_some())
-        && lost_length(a, &om, params.gate) <= LOST_SLACK
-        && lost_length(b, &om, params.gate) <= LOST_SLACK
 }
 
 /// The class rule of a whole-instance merge: `detected` merged into `current`. Polylines: the
@@ -195,10 +197,10 @@ mod tests {
             ..MergeMapParams::default()
         };
         // the merged line kept one side: every vertex lies within the 3 m tolerance ...
-        let om = Outline::of(&side, false);
-        assert!(within(&u, &om, params.tolerance));
+        let d = distances(&u, &Outline::of(&side, false), params.tolerance);
+        assert!(d.iter().all(Option::is_some));
         // ... but 30 m of the U lie farther than the gate from it
-        assert!(lost_length(&u, &om, params.gate) > 29.0);
+        assert!(lost_length(&u, &d, params.gate) > 29.0);
         assert!(!faithful(&side, &u, &side, &params));
         assert!(faithful(&u, &u, &side, &params));
         // a hook of 2 m smoothed away is a faithful merge
@@ -207,7 +209,8 @@ mod tests {
             vec![p(30.5, 1.0), p(31.0, 2.0), p(31.0, 2.8)],
         ]
         .concat();
-        let lost = lost_length(&hooked, &Outline::of(&side, false), params.gate);
+        let d = distances(&hooked, &Outline::of(&side, false), params.tolerance);
+        let lost = lost_length(&hooked, &d, params.gate);
         assert!((lost - (1.25f64.sqrt() + 0.8)).abs() < 1e-9, "{lost}");
         assert!(faithful(&side, &hooked, &side, &params));
         // with no slack left for it, the gate decides: a merge 1 m off everywhere
