@@ -309,6 +309,44 @@ def test_stage2_loop_runs_from_stage1(tmp_path: Path, monkeypatch: pytest.Monkey
     assert any(not torch.equal(before[k], after[k]) for k in before if k.startswith("fusion."))
 
 
+def test_stage2_with_fresh_fusion_restarts_it_from_its_initial_weights(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """``stage2.fresh_fusion``: a stage 2 from a trained checkpoint starts its fusion where a
+    stage-1 run leaves it (the seeded initial weights), the rest as the checkpoint holds it."""
+    import icmapper.training.objectives as objectives
+
+    orig = objectives.Stage2Objective.__init__
+
+    def init(self, net, cfg, map_factory=None):  # the Rust GlobalMap may not be built yet
+        orig(self, net, cfg, map_factory=FakeMap)
+
+    monkeypatch.setattr(objectives.Stage2Objective, "__init__", init)
+    cfg = tiny_config(stage2={"steps": 2, "clip_len": 3, "score_threshold": 0.0})
+    train(cfg, 1, tmp_path / "s1", max_steps=1, progress=False)
+    stage1 = load_checkpoint(tmp_path / "s1" / "stage1.pt")["model"]
+    train(cfg, 2, tmp_path / "s1", progress=False)  # a trained fusion
+    trained = tmp_path / "s1" / "stage2.pt"
+    captured: dict[str, dict[str, torch.Tensor]] = {}
+
+    def capture(self, net, cfg, map_factory=None):
+        captured["start"] = {k: v.clone() for k, v in net.state_dict().items()}
+        orig(self, net, cfg, map_factory=FakeMap)
+
+    monkeypatch.setattr(objectives.Stage2Objective, "__init__", capture)
+    fresh = dataclasses.replace(cfg, stage2=dataclasses.replace(cfg.stage2, fresh_fusion=True))
+    train(fresh, 2, tmp_path / "fresh", init=trained, progress=False)
+    start, held = captured["start"], load_checkpoint(trained)["model"]
+    for k, v in start.items():
+        want = stage1[k] if k.startswith("fusion.") else held[k]
+        assert torch.equal(v, want), k
+    assert any(not torch.equal(stage1[k], held[k]) for k in stage1 if k.startswith("fusion."))
+    train(cfg, 2, tmp_path / "kept", init=trained, progress=False)  # without: a fine-tune
+    assert all(
+        torch.equal(captured["start"][k], held[k]) for k in held if k.startswith("fusion.")
+    )
+
+
 def test_configs_load_and_validate(tmp_path: Path) -> None:
     small = load_config(REPO / "configs" / "small.toml")
     paper = load_config(REPO / "configs" / "paper.toml")

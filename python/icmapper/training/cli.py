@@ -35,7 +35,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--init",
         type=Path,
         default=None,
-        help="stage 2: stage-1 checkpoint; stage 1: weights to fine-tune (or, with "
+        help="stage 2: stage-1 checkpoint (or a trained one, with stage2.fresh_fusion: its "
+        "fusion starts afresh); stage 1: weights to fine-tune (or, with "
         "stage1.freeze_encoder, the encoder); a checkpoint of another BEV grid is resampled "
         "to this config's (models.checkpoint.regrid_state)",
     )

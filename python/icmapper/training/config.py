@@ -107,6 +107,10 @@ class Stage2Config:
     #: frame's BEV as inference streams it, the memory carried from the sequence start rather
     #: than reset at each clip; the detector takes about two thirds of a step on the CPU
     cached_bev: bool = False
+    #: start the fusion from its initial weights (the seeded ones a stage-1 run leaves it at)
+    #: whatever ``--init`` holds: a stage 2 retrained from a trained checkpoint, such as the
+    #: shipped one, after the mapper or the vectoriser changed what the fusion sees
+    fresh_fusion: bool = False
 
 
 @dataclass(frozen=True)
