@@ -342,9 +342,7 @@ def test_stage2_with_fresh_fusion_restarts_it_from_its_initial_weights(
         assert torch.equal(v, want), k
     assert any(not torch.equal(stage1[k], held[k]) for k in stage1 if k.startswith("fusion."))
     train(cfg, 2, tmp_path / "kept", init=trained, progress=False)  # without: a fine-tune
-    assert all(
-        torch.equal(captured["start"][k], held[k]) for k in held if k.startswith("fusion.")
-    )
+    assert all(torch.equal(captured["start"][k], held[k]) for k in held if k.startswith("fusion."))
 
 
 def test_configs_load_and_validate(tmp_path: Path) -> None:
