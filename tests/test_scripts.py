@@ -61,6 +61,42 @@ def test_map_experiment_stop_holds_the_middle_frame() -> None:
     np.testing.assert_array_equal(held.frame(k + 3).images, seq.frame(k).images)
 
 
+def test_map_experiment_coverage_floor() -> None:
+    """``coverage_floor``: half the truth's mean distance to the nearest detected point, per
+    class, averaged over drives; a class with truth and no detection in a drive is inf."""
+    import importlib.util
+    from types import SimpleNamespace
+
+    import numpy as np
+
+    spec = importlib.util.spec_from_file_location(
+        "map_experiment", REPO / "scripts" / "map_experiment.py"
+    )
+    assert spec is not None and spec.loader is not None
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+
+    def inst(cls: int, pts: list[list[float]], closed: bool = False) -> SimpleNamespace:
+        return SimpleNamespace(cls=cls, points=np.asarray(pts, float), closed=closed)
+
+    line = [[0.0, 0.0], [10.0, 0.0]]
+    ring = [[0.0, 0.0], [4.0, 0.0], [4.0, 3.0], [0.0, 3.0]]
+    gt = [inst(1, line), inst(2, [[0.0, 5.0], [10.0, 5.0]]), inst(0, ring, True)]
+    seen = [
+        (1, np.asarray([[0.0, 1.0], [10.0, 1.0]])),  # the lane line seen 1 m off
+        (2, np.asarray([[0.0, 5.0], [5.0, 5.0]])),  # half of the kerb seen
+        (0, np.asarray(ring) + [0.0, 2.0]),  # the crossing's ring 2 m off
+    ]
+    ped, div, bound = mod.coverage_floor([gt], [seen])
+    assert div == pytest.approx(0.5)
+    # the kerb's samples every 0.5 m (CD_STEP): 0 on the seen half, then 0.5 ... 5 m
+    xs = np.linspace(0.0, 10.0, 21)
+    assert bound == pytest.approx(0.5 * np.maximum(xs - 5.0, 0.0).mean())
+    assert 0.0 < ped < 1.0
+    # a second drive where nothing was detected: inf for its classes
+    assert mod.coverage_floor([gt, gt], [seen, []])[1] == float("inf")
+
+
 def test_diagnose_gap_finds_a_kerb_round_an_island() -> None:
     """``scripts/diagnose_gap.py``'s U column: a kerb up one side of a 2.5 m island, round its
     nose and down the other lies on itself; a straight kerb, an L and a U too short do not."""
