@@ -92,3 +92,41 @@ def test_export_replaces_the_mapper_settings(tmp_path: Path) -> None:
     assert torch.equal(load_checkpoint(dst)["model"]["w"], w["w"])
     with pytest.raises(ValueError, match="must be a table"):
         export_checkpoint(src, dst, [("min_hits", 1)])  # type: ignore[arg-type]
+
+
+def test_export_takes_a_module_from_another_checkpoint(tmp_path: Path) -> None:
+    """``export_checkpoint(..., take={"fusion.": OTHER})`` (``--take fusion.=OTHER``): the
+    tensors under the prefix come from the other checkpoint, the rest from the source; a prefix
+    the other lacks, or other names or shapes under it, is an error naming the file. The command
+    line composes the same file."""
+    import torch
+    from icmapper.models.checkpoint import export_checkpoint, load_checkpoint, save_checkpoint
+
+    def ckpt(path: Path, fill: float, shape: tuple[int, ...] = (3,)) -> Path:
+        model = {
+            "association.w": torch.full((2,), fill),
+            "fusion.a": torch.full(shape, fill),
+            "fusion.b": torch.full((1,), fill),
+        }
+        save_checkpoint(path, model=model, optimizer=None, stage=2, step=1, config={})
+        return path
+
+    src, other = ckpt(tmp_path / "src.pt", 1.0), ckpt(tmp_path / "other.pt", 2.0)
+    dst = tmp_path / "out.pt"
+    export_checkpoint(src, dst, take={"fusion.": other})
+    got = load_checkpoint(dst)["model"]
+    assert torch.equal(got["association.w"], torch.full((2,), 1.0))
+    assert torch.equal(got["fusion.a"], torch.full((3,), 2.0))
+    assert torch.equal(got["fusion.b"], torch.full((1,), 2.0))
+    with pytest.raises(ValueError, match="no tensor under 'decoder.'"):
+        export_checkpoint(src, dst, take={"decoder.": other})
+    wide = ckpt(tmp_path / "wide.pt", 3.0, (4,))
+    with pytest.raises(ValueError, match="wide.pt.*names or shapes"):
+        export_checkpoint(src, dst, take={"fusion.": wide})
+    cli = tmp_path / "cli.pt"
+    subprocess.run(
+        [sys.executable, "-m", "icmapper.models.checkpoint", str(src), str(cli), "--take",
+         f"fusion.={other}"],
+        check=True,
+    )  # fmt: skip
+    assert all(torch.equal(v, load_checkpoint(cli)["model"][k]) for k, v in got.items())

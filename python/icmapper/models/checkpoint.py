@@ -67,23 +67,43 @@ def load_checkpoint(path: str | Path, map_location: str | torch.device = "cpu") 
 
 
 def export_checkpoint(
-    src: str | Path, dst: str | Path, mapper: dict[str, Any] | None = None
+    src: str | Path,
+    dst: str | Path,
+    mapper: dict[str, Any] | None = None,
+    take: dict[str, str | Path] | None = None,
 ) -> None:
     """Writes an inference checkpoint: ``src`` without optimizer and RNG state (smaller; what the
     Mapper needs), atomically. ``mapper``: a ``[mapper]`` table (the mapper settings chosen on
     validation for this network) that replaces the checkpoint's, so that settings are retuned
-    without retraining. Usage: ``python -m icmapper.models.checkpoint SRC DST [--mapper-from
-    CONFIG.toml]`` (the ``[mapper]`` table of a training config, checked as the training run
-    checks it)."""
+    without retraining. ``take``: {module prefix (e.g. ``"fusion."``): checkpoint} whose
+    tensors under that prefix replace ``src``'s (a network composed of separately trained parts:
+    an association retrained beside a shipped fusion); ValueError when the other checkpoint has
+    no tensor under the prefix, or not the same names and shapes there. Usage: ``python -m
+    icmapper.models.checkpoint SRC DST [--mapper-from CONFIG.toml] [--take PREFIX=FILE ...]``
+    (the ``[mapper]`` table of a training config, checked as the training run checks it)."""
     blob = load_checkpoint(src)
     config = dict(blob["config"])
     if mapper is not None:
         if not isinstance(mapper, dict):
             raise ValueError(f"the [mapper] settings must be a table, got {type(mapper).__name__}")
         config["mapper"] = dict(mapper)
+    model = dict(blob["model"])
+    for prefix, path in (take or {}).items():
+        other = load_checkpoint(path)["model"]
+        mine = {k: v for k, v in model.items() if k.startswith(prefix)}
+        theirs = {k: v for k, v in other.items() if k.startswith(prefix)}
+        if not theirs:
+            raise ValueError(f"checkpoint {path} has no tensor under {prefix!r}")
+        shapes = {k: tuple(v.shape) for k, v in theirs.items()}
+        if shapes != {k: tuple(v.shape) for k, v in mine.items()}:
+            raise ValueError(
+                f"checkpoint {path}: the tensors under {prefix!r} differ in names or shapes "
+                f"from {src}'s"
+            )
+        model.update(theirs)
     save_checkpoint(
         dst,
-        model=blob["model"],
+        model=model,
         optimizer=None,
         stage=blob["stage"],
         step=blob["step"],
@@ -124,14 +144,31 @@ def regrid_state(
 
 
 if __name__ == "__main__":  # pragma: no cover
-    import sys
+    import argparse
 
-    args = sys.argv[1:]
-    if len(args) == 4 and args[2] == "--mapper-from":
+    ap = argparse.ArgumentParser(
+        prog="python -m icmapper.models.checkpoint", description=export_checkpoint.__doc__
+    )
+    ap.add_argument("src")
+    ap.add_argument("dst")
+    ap.add_argument("--mapper-from", metavar="CONFIG.toml", help="its [mapper] table")
+    ap.add_argument(
+        "--take",
+        action="append",
+        default=[],
+        metavar="PREFIX=FILE",
+        help="the tensors under PREFIX (e.g. fusion.) from checkpoint FILE (repeatable)",
+    )
+    a = ap.parse_args()
+    mapper = None
+    if a.mapper_from:
         from icmapper.training.config import load_config
 
-        export_checkpoint(args[0], args[1], load_config(args[3]).mapper)
-    elif len(args) == 2:
-        export_checkpoint(args[0], args[1])
-    else:
-        sys.exit("usage: python -m icmapper.models.checkpoint SRC DST [--mapper-from CONFIG.toml]")
+        mapper = load_config(a.mapper_from).mapper
+    take = {}
+    for item in a.take:
+        prefix, sep, path = item.partition("=")
+        if not sep or not prefix or not path:
+            ap.error(f"--take wants PREFIX=FILE, got {item!r}")
+        take[prefix] = path
+    export_checkpoint(a.src, a.dst, mapper, take)
