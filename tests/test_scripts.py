@@ -4,14 +4,25 @@ experiment's stopped drives are what its --stop says."""
 
 from __future__ import annotations
 
+import importlib.util
 import shutil
 import subprocess
 from pathlib import Path
+from types import ModuleType
 
 import pytest
 
 REPO = Path(__file__).resolve().parents[1]
 SCRIPTS = sorted((REPO / "scripts").glob("*.sh"))
+
+
+def _script(name: str) -> ModuleType:
+    """scripts/NAME.py imported as a module (the scripts are not a package)."""
+    spec = importlib.util.spec_from_file_location(name, REPO / "scripts" / f"{name}.py")
+    assert spec is not None and spec.loader is not None
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
 
 
 @pytest.mark.parametrize("script", SCRIPTS, ids=[s.name for s in SCRIPTS])
@@ -37,17 +48,10 @@ def test_gpu_paper_refuses_a_bad_phase(args: list[str], tmp_path: Path) -> None:
 def test_map_experiment_stop_holds_the_middle_frame() -> None:
     """``scripts/map_experiment.py --stop N``'s drives: the middle frame held N more frames (its
     pose and images), the rest as they were, keyframes 0.5 s apart."""
-    import importlib.util
-
     import numpy as np
     from icmapper.data.sources import open_source
 
-    spec = importlib.util.spec_from_file_location(
-        "map_experiment", REPO / "scripts" / "map_experiment.py"
-    )
-    assert spec is not None and spec.loader is not None
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
+    mod = _script("map_experiment")
     seq = open_source("sim:val:1", image_size=(32, 88))[0]
     t, k = len(seq), len(seq) // 2
     held = mod.with_stop(seq, 5)
@@ -64,17 +68,11 @@ def test_map_experiment_stop_holds_the_middle_frame() -> None:
 def test_map_experiment_coverage_floor() -> None:
     """``coverage_floor``: half the truth's mean distance to the nearest detected point, per
     class, averaged over drives; a class with truth and no detection in a drive is inf."""
-    import importlib.util
     from types import SimpleNamespace
 
     import numpy as np
 
-    spec = importlib.util.spec_from_file_location(
-        "map_experiment", REPO / "scripts" / "map_experiment.py"
-    )
-    assert spec is not None and spec.loader is not None
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
+    mod = _script("map_experiment")
 
     def inst(cls: int, pts: list[list[float]], closed: bool = False) -> SimpleNamespace:
         return SimpleNamespace(cls=cls, points=np.asarray(pts, float), closed=closed)
@@ -100,16 +98,9 @@ def test_map_experiment_coverage_floor() -> None:
 def test_diagnose_gap_finds_a_kerb_round_an_island() -> None:
     """``scripts/diagnose_gap.py``'s U column: a kerb up one side of a 2.5 m island, round its
     nose and down the other lies on itself; a straight kerb, an L and a U too short do not."""
-    import importlib.util
-
     import numpy as np
 
-    spec = importlib.util.spec_from_file_location(
-        "diagnose_gap", REPO / "scripts" / "diagnose_gap.py"
-    )
-    assert spec is not None and spec.loader is not None
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
+    mod = _script("diagnose_gap")
     nose = np.stack(
         [1.25 * np.sin(np.linspace(0, np.pi, 9)), 1.25 * np.cos(np.linspace(0, np.pi, 9))], 1
     )
