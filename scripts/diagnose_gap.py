@@ -15,7 +15,8 @@ lie on themselves (column U: a kerb around a median island, one instance up one 
 nose and down the other; within ``U_GAP`` metres of itself over more than ``U_LENGTH`` metres,
 counting samples more than ``U_APART`` metres apart along it). Then how far the true lines lie
 from the map, U and the others apart: the mean distance of their samples to the nearest map line
-of the class (the coverage half of the class's CD, pooled over the drives, ``coverage``).
+of the class (the coverage half of the class's CD, pooled over the drives:
+``coverage``, which is ``eval.globalmap.sample_distances``).
 
     .venv/bin/python scripts/diagnose_gap.py --source sim:val:12 --maps /tmp/maps/icmapper --cls 2
 """
@@ -27,6 +28,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+from icmapper.eval.globalmap import sample_distances as coverage
 
 #: A true line lies on itself where a sample has another within this many metres ...
 U_GAP = 4.0
@@ -48,20 +50,6 @@ def lies_on_itself(points: np.ndarray) -> bool:
     near = cKDTree(d).query_ball_point(d, U_GAP)
     on_itself = sum(any(abs(t[j] - t[i]) > U_APART for j in js) for i, js in enumerate(near))
     return 0.5 * on_itself > U_LENGTH
-
-
-def coverage(truth: np.ndarray, lines: list[np.ndarray], closed: bool = False) -> np.ndarray:
-    """Distance (n,) from each sample of a true polyline (m, 2) (a ring when ``closed``: a
-    crossing), sampled as the CD samples it, to the nearest sample of the map's ``lines`` (each
-    (k, 2), of the same kind); infinite without lines."""
-    from icmapper.eval.globalmap import dense_sample
-    from scipy.spatial import cKDTree
-
-    q = dense_sample(np.asarray(truth, np.float64), closed)
-    if not lines:
-        return np.full(len(q), np.inf)
-    pts = np.concatenate([dense_sample(np.asarray(x, np.float64), closed) for x in lines])
-    return cKDTree(pts).query(q)[0]
 
 
 def main(argv: list[str] | None = None) -> int:

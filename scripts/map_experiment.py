@@ -370,22 +370,16 @@ def coverage_floor(ggts: list, seen: list[list[tuple[int, np.ndarray]]]) -> list
     averaged over the drives as the CD is. The coverage half of the CD of a map holding every
     point the detections drew: a map drawn from them comes no closer to the truths they never
     reached, so no method's CD of that class falls much below it (the precision half adds)."""
-    from icmapper.eval.globalmap import dense_sample
-    from scipy.spatial import cKDTree
+    from icmapper.eval.globalmap import sample_distances
 
     out = []
     for c in (0, 1, 2):
         per_drive = []
         for gt, dets in zip(ggts, seen, strict=True):
-            truth = [dense_sample(m.points, m.closed) for m in gt if int(m.cls) == c]
-            lines = [dense_sample(x, c == 0) for k, x in dets if k == c]
-            if not truth:
-                continue
-            if not lines:
-                per_drive.append(float("inf"))
-                continue
-            d = cKDTree(np.concatenate(lines)).query(np.concatenate(truth))[0]
-            per_drive.append(0.5 * float(d.mean()))
+            lines = [x for k, x in dets if k == c]
+            d = [sample_distances(m.points, lines, c == 0) for m in gt if int(m.cls) == c]
+            if d:
+                per_drive.append(0.5 * float(np.concatenate(d).mean()))
         out.append(float(np.mean(per_drive)) if per_drive else float("nan"))
     return out
 

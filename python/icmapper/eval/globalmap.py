@@ -44,6 +44,21 @@ def dense_sample(points: NDArray[np.floating], closed: bool, step: float = CD_ST
     return resample_many(pts[None], max(m, 1), closed)[0]
 
 
+def sample_distances(
+    truth: NDArray[np.floating], lines: Seq[NDArray[np.floating]], closed: bool = False
+) -> NDArray[np.float64]:
+    """Distance (n,) from each sample of ``truth`` (m, 2), a polyline (a ring when ``closed``)
+    sampled as the CD samples it, to the nearest sample of ``lines`` (each (k, 2), of the same
+    kind): the coverage half of a CD, per sample, for diagnosis. Infinite without lines."""
+    from scipy.spatial import cKDTree
+
+    q = dense_sample(np.asarray(truth, np.float64), closed)
+    if not lines:
+        return np.full(len(q), np.inf)
+    pts = np.concatenate([dense_sample(np.asarray(x, np.float64), closed) for x in lines])
+    return cKDTree(pts).query(q)[0]
+
+
 def _class_cloud(
     instances: Seq[tuple[int, NDArray, bool]], c: int, step: float, cap: int
 ) -> NDArray:

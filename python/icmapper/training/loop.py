@@ -293,9 +293,10 @@ def train(
         torch.set_rng_state(blob["rng"])
     elif stage == 2:
         src = Path(init) if init is not None else out / "stage1.pt"
-        initial = {k: v.clone() for k, v in net.fusion.state_dict().items()}
+        fresh = cfg.stage2.fresh_fusion  # the seeded initial fusion, whatever src holds
+        initial = {k: v.clone() for k, v in net.fusion.state_dict().items()} if fresh else {}
         net.load_state_dict(load_checkpoint(src)["model"])
-        if cfg.stage2.fresh_fusion:  # the seeded initial fusion, whatever src holds
+        if fresh:
             net.fusion.load_state_dict(initial)
     elif cfg.stage1.freeze_encoder:
         if init is None:
