@@ -127,6 +127,7 @@ class DriveMapper:
         seq = self.sequence(task.spec, task.sequence)
         method, _ = self.factory(seq, None)
         method.reset()
+        before: dict[int, int] = {}  # a continued map's instances: id -> observations
         if start_map is not None:
             restore = getattr(method, "restore", None)
             tracker = getattr(method, "tracker", None)
@@ -138,7 +139,7 @@ class DriveMapper:
             restore(gmap, alias={})
             before = {int(i): gmap.info(int(i))["observations"] for i in ids.tolist()}
         frames, gmap = map_sequence(
-            method, seq, self.inp.needs_images, reset=False, on_frame=on_frame
+            method, seq, self.inp.needs_images, reset=False, on_frame=on_frame, keep=before
         )
         if start_map is None:
             gmap.tag_drive(task.index)

@@ -143,6 +143,13 @@ class Evidence:
     def drives(self) -> list[int]:
         return sorted({d for d, _ in self.expected + self.seen})
 
+    def mostly_missed(self, frames: int, share: float) -> bool:
+        """Whether it was expected in at least ``frames`` frames and missed in at least
+        ``frames`` of them and at least ``share`` of them (a city update's removal test, and
+        ``mapping.verify``'s)."""
+        n, k = len(self.expected), len(self.missed)
+        return n >= frames and k >= frames and k >= share * n
+
 
 @dataclass
 class Change:
@@ -394,12 +401,7 @@ class ChangeDetector:
         for i in sorted(self.stored):
             s = self.stored[i]
             ev = s.evidence
-            n = len(ev.expected)
-            if (
-                n >= self.cfg.remove_frames
-                and len(ev.missed) >= self.cfg.remove_frames
-                and len(ev.missed) >= self.cfg.remove_share * n
-            ):
+            if ev.mostly_missed(self.cfg.remove_frames, self.cfg.remove_share):
                 out.append(Change("removed", s.cls, i, s.points, s.closed, ev))
                 continue
             ref = reference.stored.get(i) if reference is not None else None

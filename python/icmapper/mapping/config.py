@@ -63,6 +63,16 @@ class MapperConfig:
         "clean-up of the finished map, for every method: absorb every instance that lies on a "
         "same-class neighbour, remove stubs across lanes (mapping.map_nms)",
     )
+    verify: bool = _f(
+        True,
+        "check of the finished map against the drive's own detections, for every method: an "
+        "instance in view in >= verify_frames frames and not detected (score >= "
+        "track_threshold) in >= verify_share of them is removed (mapping.verify)",
+    )
+    verify_frames: int = _f(3, "verify: frames an instance must be in view to be checked")
+    verify_share: float = _f(
+        0.7, "verify: share of the frames in view without a detection that removes an instance"
+    )
     stub_length: float = _f(
         15.0,
         "map_nms and drop_stubs: metres under which a divider crossing a longer one is a stub "
@@ -171,7 +181,7 @@ class MapperConfig:
                      "absorb_boundary_gate"):  # fmt: skip
             if not getattr(self, name) > 0:
                 raise ValueError(f"MapperConfig.{name} must be > 0, got {getattr(self, name)}")
-        for name in ("min_hits", "cluster_min_samples"):
+        for name in ("min_hits", "cluster_min_samples", "verify_frames"):
             if getattr(self, name) < 1:
                 raise ValueError(f"MapperConfig.{name} must be >= 1, got {getattr(self, name)}")
         for name in ("max_age", "reid_distance", "beside_gate", "fusion_margin", "smoothing",
@@ -197,6 +207,8 @@ class MapperConfig:
             )
         if not 0.0 <= self.stub_angle <= 90.0:
             raise ValueError(f"MapperConfig.stub_angle must be in [0, 90], got {self.stub_angle}")
+        if not 0.0 < self.verify_share <= 1.0:
+            raise ValueError(f"MapperConfig.verify_share must be in (0, 1], got {self.verify_share}")
         if not 0.0 < self.absorb_overlap <= 1.0:
             raise ValueError(
                 f"MapperConfig.absorb_overlap must be in (0, 1], got {self.absorb_overlap}"

@@ -7,7 +7,7 @@ replay them (``ReplaySource``), so a comparison runs the detector once per frame
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Collection
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -344,22 +344,29 @@ def map_sequence(
     progress: Any = None,
     reset: bool = True,
     on_frame: FrameCallback | None = None,
+    keep: Collection[int] = (),
 ) -> tuple[list[Any], Any]:
     """Runs one method over one sequence: (per-frame FramePredictions, global map).
     ``progress``: a bar (``icmapper.progress``) advanced by one per frame; ``on_frame``: a
     callback (frames done, frames of the sequence) after every frame (opt-in progress for the
     Python API). ``reset=False`` continues the method's current state (a city map continued
-    drive after drive: the caller resets it and loads the map first)."""
+    drive after drive: the caller resets it and loads the map first; ``keep``: the ids of the
+    map it loaded, which the drive's check, ``MapperConfig.verify``, leaves alone). The
+    finished map is checked (``mapping.verify``) and cleaned (``mapping.map_nms``) as the
+    method's config asks."""
     from icmapper.eval.runfmt import FramePredictions
     from icmapper.mapping.map_nms import map_nms
+    from icmapper.mapping.verify import verify_map
 
     if reset:
         method.reset()
     frames = []
+    seen = []  # per frame: (pose (4, 4), the detections the method received)
     fresh = 1 << 50
     for i in range(len(seq)):
         frame = seq.frame(i, with_images=with_images)
         res = method.step(frame)
+        seen.append((np.asarray(frame.pose, dtype=np.float64), res.detections))
         ids, fresh = unique_track_ids(res.track_ids, fresh)
         frames.append(
             FramePredictions(
@@ -377,6 +384,8 @@ def map_sequence(
         if on_frame is not None:
             on_frame(i + 1, len(seq))
     gmap = method.finish()
+    if method.config.verify:
+        verify_map(gmap, seen, method.config, method.rng, keep)
     if method.config.map_nms:
         map_nms(gmap, method.config)
     return frames, gmap

@@ -14,7 +14,7 @@ from numpy.typing import NDArray
 
 if TYPE_CHECKING:
     from icmapper._icmap import GlobalMap
-    from icmapper.data.types import Frame
+    from icmapper.data.types import Frame, PerceptionRange
     from icmapper.mapping.config import MapperConfig
 
 
@@ -85,6 +85,7 @@ class MappingMethod(Protocol):
 
     name: str
     config: MapperConfig  # the settings it runs with
+    rng: PerceptionRange  # the perception range its detections cover
 
     def reset(self) -> None:
         """Forget everything: a new sequence starts."""

@@ -80,7 +80,7 @@ class Baseline:
         self.source = source
         self.config = config or MapperConfig()
         self.score_threshold = self.config.baseline_threshold
-        self.range = rng
+        self.rng = rng
         self.setup()
 
     def setup(self) -> None:
@@ -97,7 +97,7 @@ class OnlineMapBaseline(Baseline):
 
     def setup(self) -> None:
         self.map: GlobalMap = new_global_map(self.config)
-        self.crossings = CrossingMerger(self.config.crossing_merge, self.range)
+        self.crossings = CrossingMerger(self.config.crossing_merge, self.rng)
 
     def reset(self) -> None:
         self.source.reset()

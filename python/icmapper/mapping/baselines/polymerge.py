@@ -48,7 +48,7 @@ class PolyMerge(OnlineMapBaseline):
         ids = np.full(len(dets), -1, np.int64)
         inserted: list[int] = []
         merged: list[int] = []
-        half = (self.range.half_x, self.range.half_y)
+        half = (self.rng.half_x, self.rng.half_y)
         for i in range(len(dets)):
             cls = int(dets.classes[i])
             closed = MapClass(cls).closed
