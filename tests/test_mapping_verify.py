@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from icmapper import GlobalMap
 from icmapper.data.sources import open_source
-from icmapper.data.types import RANGE_60x30, Frame, Sequence
+from icmapper.data.types import Frame, RANGE_60x30, Sequence
 from icmapper.mapping.config import MapperConfig
 from icmapper.mapping.mapper import Mapper
 from icmapper.mapping.methods import method

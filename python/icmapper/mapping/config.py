@@ -208,7 +208,9 @@ class MapperConfig:
         if not 0.0 <= self.stub_angle <= 90.0:
             raise ValueError(f"MapperConfig.stub_angle must be in [0, 90], got {self.stub_angle}")
         if not 0.0 < self.verify_share <= 1.0:
-            raise ValueError(f"MapperConfig.verify_share must be in (0, 1], got {self.verify_share}")
+            raise ValueError(
+                f"MapperConfig.verify_share must be in (0, 1], got {self.verify_share}"
+            )
         if not 0.0 < self.absorb_overlap <= 1.0:
             raise ValueError(
                 f"MapperConfig.absorb_overlap must be in (0, 1], got {self.absorb_overlap}"
