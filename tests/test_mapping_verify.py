@@ -15,7 +15,7 @@ from icmapper.mapping.mapper import Mapper
 from icmapper.mapping.methods import method
 from icmapper.mapping.run import map_sequence
 from icmapper.mapping.types import Detections
-from icmapper.mapping.verify import unbacked, verify_map
+from icmapper.mapping.verify import MIN_TRIM, check, verify_map
 
 #: The car drives along y = 0 from x = 0, 3 m per frame, 8 frames.
 STEP, FRAMES = 3.0, 8
@@ -90,30 +90,76 @@ def _map() -> tuple[GlobalMap, dict[str, int]]:
     return gm, ids
 
 
+def removed(frames: list, cfg: MapperConfig, keep: set[int] | frozenset = frozenset()) -> list:
+    gm, _ = _map()
+    return check(gm, frames, cfg, RANGE_60x30, keep).removed
+
+
 def test_an_instance_the_drive_does_not_back_is_removed() -> None:
     gm, ids = _map()
     cfg = MapperConfig()
-    assert unbacked(gm, _frames(), cfg, RANGE_60x30) == [ids["stray"]]
+    assert removed(_frames(), cfg) == [ids["stray"]]
     # the stray was in view in all 8 frames and detected in 1: with verify_share 0.9 (7 of 8
     # frames missed is 0.875) or verify_frames 8 (it was missed in 7) it stays
-    assert unbacked(gm, _frames(), replace(cfg, verify_share=0.9), RANGE_60x30) == []
-    assert unbacked(gm, _frames(), replace(cfg, verify_frames=8), RANGE_60x30) == []
+    assert removed(_frames(), replace(cfg, verify_share=0.9)) == []
+    assert removed(_frames(), replace(cfg, verify_frames=8)) == []
     # a continued map's earlier instances are left alone
-    assert unbacked(gm, _frames(), cfg, RANGE_60x30, keep={ids["stray"]}) == []
+    assert removed(_frames(), cfg, keep={ids["stray"]}) == []
     # detections below track_threshold back nothing: the lane line goes too, the edge piece,
     # in view in one frame, stays
     weak = [(p, replace(d, scores=np.full(len(d.scores), 0.3, np.float32))) for p, d in _frames()]
-    assert unbacked(gm, weak, cfg, RANGE_60x30) == sorted([ids["lane"], ids["stray"]])
-    assert verify_map(gm, _frames(), cfg, RANGE_60x30) == [ids["stray"]]
+    assert removed(weak, cfg) == sorted([ids["lane"], ids["stray"]])
+    verdict = verify_map(gm, _frames(), cfg, RANGE_60x30)
+    assert verdict.removed == [ids["stray"]] and verdict.trimmed == {}
     assert sorted(int(i) for i in gm.ids()) == sorted([ids["lane"], ids["edge"]])
+
+
+def test_a_line_drawn_past_what_is_there_loses_the_unbacked_end() -> None:
+    """The lane line is stored 12 m longer at its start than any detection draws it (x -72 to
+    -60): the car sees that end in its first frames, where nothing backs it, so it is cut off;
+    the backed rest stays as stored, with its bookkeeping. An overshoot shorter than
+    ``MIN_TRIM`` stays."""
+    for extra, cut in ((12.0, True), (MIN_TRIM / 2, False)):
+        gm = GlobalMap()
+        lane = gm.insert(1, line(-60.0 - extra, 80.0, 0.0, int(141 + extra)))
+        before = np.asarray(gm.get(lane)[1])
+        obs = gm.info(lane)["observations"]
+        frames = [(_at(-50.0 + STEP * i), _seen_from(-50.0 + STEP * i)) for i in range(FRAMES)]
+        verdict = verify_map(gm, frames, MapperConfig(), RANGE_60x30)
+        after = np.asarray(gm.get(lane)[1])
+        assert verdict.removed == []
+        if cut:
+            a, b = verdict.trimmed[lane]
+            assert b == len(before) and np.array_equal(after, before[a:b])
+            assert -61.0 <= after[0, 0] <= -58.0  # cut where the backed line begins
+            assert gm.info(lane)["observations"] == obs
+        else:
+            assert verdict.trimmed == {} and np.array_equal(after, before)
+
+
+def _at(x: float) -> np.ndarray:
+    p = np.eye(4)
+    p[0, 3] = x
+    return p  # (4, 4) ego -> world
+
+
+def _seen_from(x: float) -> Detections:
+    """The lane line as detected from ego position ``x``: its part in range from x = -60 on."""
+    ego = LANE[1] - np.array([x, 0.0])  # (n, 2)
+    inside = ego[np.abs(ego[:, 0]) <= 30.0]
+    pts = inside[np.linspace(0, len(inside) - 1, 20).astype(int)]
+    return Detections(
+        classes=np.array([1]),
+        scores=np.array([0.9], np.float32),
+        points=pts[None].astype(np.float32),
+    )
 
 
 def test_a_car_standing_still_is_one_view() -> None:
     """The same frame 8 times (a car at a light) is one frame of evidence: fewer than
     ``verify_frames``, so nothing is removed."""
-    gm, _ = _map()
     frames = [(pose(1), detections(1))] * FRAMES
-    assert unbacked(gm, frames, MapperConfig(), RANGE_60x30) == []
+    assert removed(frames, MapperConfig()) == []
 
 
 @pytest.mark.parametrize("name", ["icmapper", "post-track", "polymerge"])

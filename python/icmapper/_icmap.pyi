@@ -243,6 +243,12 @@ class GlobalMap:
         observation count updated. For merge rules implemented outside the store (baselines).
         KeyError for an unknown id; ValueError for bad geometry (the instance is unchanged)."""
 
+    def trim(self, id: int, start: int, stop: int) -> None:
+        """Cuts the polyline instance ``id`` to its stored points ``[start, stop)`` (no
+        resampling; first and last frame and observation count unchanged): a clean-up of a
+        finished map (``mapping.verify``). KeyError for an unknown id; ValueError for a crossing
+        or a range out of bounds or of fewer than 2 points (the instance is unchanged)."""
+
     def splice(self, id: int, points: ArrayLike2, overlap: float = 0.5, frame: int = 0) -> None:
         """Splices the open polyline ``points`` (n, 2) world frame into instance ``id``
         (``splice_polyline(stored, points, overlap)``), resampled at ``spacing``, as a new

@@ -279,6 +279,19 @@ impl PyGlobalMap {
         py.detach(|| self.write()?.replace(id, &pts, frame).py_err())
     }
 
+    /// Cuts the polyline instance `id` to its stored points `start..stop` (no resampling, no new
+    /// observation): a clean-up of a finished map.
+    fn trim(
+        &self,
+        py: Python<'_>,
+        id: &Bound<'_, PyAny>,
+        start: usize,
+        stop: usize,
+    ) -> PyResult<()> {
+        let id = id_arg(id)?;
+        py.detach(|| self.write()?.trim(id, start, stop).py_err())
+    }
+
     /// Splices the open polyline `points` (world frame) into instance `id`: the stretch it covers
     /// (stored points within `overlap` metres) is replaced, the rest kept on either side; a new
     /// observation at `frame`. Small splices run with the GIL held, as small merges do

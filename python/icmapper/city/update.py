@@ -203,7 +203,7 @@ def _runs(mask: NDArray[np.bool_]) -> list[tuple[int, int]]:
 
 
 @dataclass
-class _Stored:
+class Stored:
     """A stored instance and its evidence."""
 
     cls: int
@@ -215,6 +215,15 @@ class _Stored:
     obs_off: list[NDArray[np.float64]] = field(default_factory=list)  # per frame: offsets
     obs_keys: list[FrameKey] = field(default_factory=list)
     near_missed: int = 0  # expected frames without a detection within remove_gate
+    point_expected: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, np.int64))
+    point_near: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, np.int64))
+    # per point (n,): frames in which it was expected, and in which a detection of its class
+    # lay within remove_gate of it (mapping.verify trims a line's unbacked ends by them)
+
+    def __post_init__(self) -> None:
+        if len(self.point_expected) != len(self.points):
+            self.point_expected = np.zeros(len(self.points), np.int64)
+            self.point_near = np.zeros(len(self.points), np.int64)
 
     def near_missed_share(self) -> float:
         return self.near_missed / max(len(self.evidence.expected), 1)
@@ -251,18 +260,18 @@ class ChangeDetector:
         config: UpdateConfig = UpdateConfig(),
     ) -> None:
         self.gmap, self.rng, self.covered, self.cfg = gmap, rng, covered, config
-        self.stored: dict[int, _Stored] = {}
+        self.stored: dict[int, Stored] = {}
         self.candidates: list[_Candidate] = []
         self.frames: list[FrameKey] = []
         self.still = 0  # frames left out: the car stood still (``min_travel``)
         self._last: dict[int, tuple[float, float, float]] = {}  # drive -> last pose observed
 
-    def _stored(self, i: int) -> _Stored:
+    def _stored(self, i: int) -> Stored:
         if i not in self.stored:
             cls, pts = self.gmap.get(i)
             closed = bool(self.gmap.info(i)["closed"])
             pts = np.asarray(pts, np.float64)
-            self.stored[i] = _Stored(int(cls), pts, _left_normals(pts), closed)
+            self.stored[i] = Stored(int(cls), pts, _left_normals(pts), closed)
         return self.stored[i]
 
     def observe(
@@ -303,7 +312,7 @@ class ChangeDetector:
         pose: NDArray[np.float64],
         c: int,
         dets: list[NDArray[np.float64]],
-        stored: list[tuple[int, _Stored]],
+        stored: list[tuple[int, Stored]],
     ) -> None:
         cfg, gate = self.cfg, self.cfg.gate[c]
         q = np.concatenate(dets) if dets else np.zeros((0, 2))  # (Q, 2) detection points
@@ -322,12 +331,14 @@ class ChangeDetector:
                 continue
             s.evidence.expected.append(key)
             idx = np.flatnonzero(expected)  # (e,)
+            s.point_expected[idx] += 1
             if tree is None:
                 s.evidence.missed.append(key)
                 s.near_missed += 1
                 continue
             dist, j = tree.query(s.points[idx], distance_upper_bound=gate)  # (e,), (e,)
             hit = np.isfinite(dist)  # (e,)
+            s.point_near[idx[dist <= cfg.remove_gate]] += 1
             if np.mean(dist <= cfg.remove_gate) < cfg.seen_share:
                 s.near_missed += 1
             if hit.mean() >= cfg.seen_share:
@@ -424,7 +435,7 @@ class ChangeDetector:
                 out.append(Change("added", cand.cls, -1, pts, closed, ev, new_points=pts))
         return out
 
-    def _missed_more_than(self, s: _Stored, ref: _Stored | None) -> bool:
+    def _missed_more_than(self, s: Stored, ref: Stored | None) -> bool:
         """Whether ``s`` was missed (nothing within ``remove_gate``) in a share of its frames at
         least ``remove_drop`` (its class's) above the share in which the reference, the same
         detector on the city's own drives, missed it: a detector that still draws a removed line
@@ -437,7 +448,7 @@ class ChangeDetector:
             return False
         return s.near_missed_share() - ref.near_missed_share() >= drop
 
-    def _median_offsets(self, s: _Stored) -> NDArray[np.float64]:
+    def _median_offsets(self, s: Stored) -> NDArray[np.float64]:
         """(n,) the median sideways offset of each stored point observed in >= ``move_obs``
         frames (NaN elsewhere)."""
         n = len(s.points)
@@ -454,7 +465,7 @@ class ChangeDetector:
             med[v] = np.median(sorted_off[starts[v] : starts[v + 1]])
         return med
 
-    def _move(self, i: int, s: _Stored, bias: NDArray[np.float64] | None = None) -> Change | None:
+    def _move(self, i: int, s: Stored, bias: NDArray[np.float64] | None = None) -> Change | None:
         """A move of stored line ``i``, if any; ``bias`` (n,): the reference's median offset
         per point (NaN: none), taken off the observed offsets."""
         if not s.obs_idx:

@@ -13,6 +13,13 @@ a car standing still counts once, ``min_travel``), and an instance expected in a
 itself says it is not there. A true piece seen only at the range edge, or only once because the
 car passed it once, is expected in few frames and stays.
 
+A line the method grew past what is there (a lane line drawn on into a junction, a kerb round a
+corner the road does not take) keeps its backed part: an end of a lane line or kerb whose points
+were expected in at least ``verify_frames`` frames and had no detection of their class within
+``UpdateConfig.remove_gate`` (1 m) in at least ``verify_share`` of them is cut off, when it is
+at least ``MIN_TRIM`` metres long. A stretch inside the line is left as it is (the line stays
+one instance).
+
 It works on the finished map only, so per-frame predictions (AP, tracking) do not change. Every
 method is checked against the same detections (those scoring at least ``track_threshold``),
 so a comparison gives every method the same clean-up; ``verify = false`` reports without it.
@@ -21,7 +28,7 @@ so a comparison gives every method the same clean-up; ``verify = false`` reports
 from __future__ import annotations
 
 from collections.abc import Collection, Iterable
-from dataclasses import replace
+from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -29,9 +36,22 @@ from numpy.typing import NDArray
 
 if TYPE_CHECKING:
     from icmapper._icmap import GlobalMap
+    from icmapper.city.update import ChangeDetector, Stored
     from icmapper.data.types import PerceptionRange
     from icmapper.mapping.config import MapperConfig
     from icmapper.mapping.types import Detections
+
+#: Shortest unbacked end (metres) cut off a lane line or kerb.
+MIN_TRIM = 2.0
+
+
+@dataclass
+class Verdict:
+    """What the check found: ``removed`` (ids, sorted) and ``trimmed`` (id -> the [start, stop)
+    of its stored points that stay)."""
+
+    removed: list[int] = field(default_factory=list)
+    trimmed: dict[int, tuple[int, int]] = field(default_factory=dict)
 
 
 def _nowhere(points: NDArray[np.float64]) -> NDArray[np.bool_]:
@@ -39,16 +59,14 @@ def _nowhere(points: NDArray[np.float64]) -> NDArray[np.bool_]:
     return np.zeros(len(points), bool)
 
 
-def unbacked(
+def gather(
     gmap: GlobalMap,
     frames: Iterable[tuple[NDArray[np.float64], Detections]],
     config: MapperConfig,
     rng: PerceptionRange,
-    keep: Collection[int] = (),
-) -> list[int]:
-    """The ids of ``gmap``'s instances that the drive's ``frames`` ((4, 4) ego -> world pose,
-    the frame's detections) do not back (module docstring), sorted; ``keep``: ids never
-    returned (a continued city map's earlier instances, which this drive did not build)."""
+) -> ChangeDetector:
+    """The evidence of the drive's ``frames`` ((4, 4) ego -> world pose, the frame's
+    detections) on every instance of ``gmap`` (a city update's, ``city.update``)."""
     from icmapper.city.update import ChangeDetector, UpdateConfig
 
     thresholds = replace(
@@ -61,11 +79,46 @@ def unbacked(
     evidence = ChangeDetector(gmap, rng, _nowhere, thresholds)
     for k, (pose, dets) in enumerate(frames):
         evidence.observe((0, k), pose, dets.classes, dets.scores, dets.points)
-    return [
-        i
-        for i, s in sorted(evidence.stored.items())
-        if i not in keep and s.evidence.mostly_missed(config.verify_frames, config.verify_share)
-    ]
+    return evidence
+
+
+def _kept_stretch(s: Stored, config: MapperConfig) -> tuple[int, int]:
+    """[start, stop) of a line's points left when its unbacked ends go (module docstring)."""
+    e, near = s.point_expected, s.point_near  # (n,), (n,)
+    bad = (e >= config.verify_frames) & (e - near >= config.verify_share * e)  # (n,)
+    a, b = 0, len(bad)
+    while a < b and bad[a]:
+        a += 1
+    while b > a and bad[b - 1]:
+        b -= 1
+    step = np.linalg.norm(np.diff(s.points, axis=0), axis=1)  # (n - 1,)
+    if step[:a].sum() < MIN_TRIM:
+        a = 0
+    if step[max(b - 1, 0) :].sum() < MIN_TRIM:
+        b = len(bad)
+    return a, b
+
+
+def check(
+    gmap: GlobalMap,
+    frames: Iterable[tuple[NDArray[np.float64], Detections]],
+    config: MapperConfig,
+    rng: PerceptionRange,
+    keep: Collection[int] = (),
+) -> Verdict:
+    """What the drive's ``frames`` do not back in ``gmap`` (module docstring); ``keep``: ids
+    left alone (a continued city map's earlier instances, which this drive did not build)."""
+    verdict = Verdict()
+    for i, s in sorted(gather(gmap, frames, config, rng).stored.items()):
+        if i in keep:
+            continue
+        if s.evidence.mostly_missed(config.verify_frames, config.verify_share):
+            verdict.removed.append(i)
+        elif not s.closed:
+            a, b = _kept_stretch(s, config)
+            if (a, b) != (0, len(s.points)) and b - a >= 2:
+                verdict.trimmed[i] = (a, b)
+    return verdict
 
 
 def verify_map(
@@ -74,9 +127,11 @@ def verify_map(
     config: MapperConfig,
     rng: PerceptionRange,
     keep: Collection[int] = (),
-) -> list[int]:
-    """Removes from ``gmap`` the instances ``unbacked`` names; returns their ids."""
-    gone = unbacked(gmap, frames, config, rng, keep)
-    for i in gone:
+) -> Verdict:
+    """Applies ``check``'s verdict to ``gmap`` (removes, cuts the ends) and returns it."""
+    verdict = check(gmap, frames, config, rng, keep)
+    for i in verdict.removed:
         gmap.remove(i)
-    return gone
+    for i, (a, b) in verdict.trimmed.items():
+        gmap.trim(i, a, b)
+    return verdict

@@ -933,6 +933,40 @@ mod tests {
     }
 
     #[test]
+    fn trim_cuts_a_line_and_keeps_its_bookkeeping() {
+        let mut m = GlobalMap::new(MapConfig::default()).unwrap();
+        let line: Vec<Point> = (0..=20).map(|i| Point::new(i as f64, 0.0)).collect();
+        let id = m.insert(MapClass::Divider, &line, 3).unwrap();
+        m.replace(id, &line, 5).unwrap();
+        let before = m.get(id).unwrap().clone();
+        m.trim(id, 2, 15).unwrap();
+        let inst = m.get(id).unwrap();
+        assert_eq!(inst.points, before.points[2..15].to_vec());
+        assert_eq!(
+            (inst.first_frame, inst.last_frame, inst.observations),
+            (before.first_frame, before.last_frame, before.observations)
+        );
+        let cut = Patch::new(Pose2::new(19.0, 0.0, 0.0).unwrap(), 0.5, 0.5, 0.0).unwrap();
+        assert!(m.query(&cut).is_empty());
+        for (a, b) in [(0, 1), (5, 5), (3, 99)] {
+            assert!(matches!(
+                m.trim(id, a, b),
+                Err(GeomError::InvalidParameter { .. })
+            ));
+        }
+        assert_eq!(m.get(id).unwrap().points.len(), 13);
+        let ring = [
+            Point::new(0.0, 0.0),
+            Point::new(4.0, 0.0),
+            Point::new(4.0, 4.0),
+            Point::new(0.0, 4.0),
+        ];
+        let crossing = m.insert(MapClass::PedCrossing, &ring, 0).unwrap();
+        assert!(m.trim(crossing, 0, 3).is_err());
+        assert!(matches!(m.trim(999, 0, 2), Err(GeomError::UnknownId(999))));
+    }
+
+    #[test]
     fn replace_keeps_bookkeeping_and_index() {
         let mut m = GlobalMap::new(MapConfig::default()).unwrap();
         let id = m

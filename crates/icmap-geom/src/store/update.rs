@@ -252,6 +252,35 @@ impl GlobalMap {
         self.commit(slot, id, stored, 1, frame)
     }
 
+    /// Cuts the polyline instance `id` to its stored points `start..stop` (no resampling), its
+    /// bookkeeping unchanged (no new observation): a clean-up of a finished map cutting off
+    /// ends the drive did not back. Errors on an unknown id, a crossing (closed) instance, or a
+    /// range out of bounds or of fewer than 2 points; the instance is then unchanged.
+    pub fn trim(&mut self, id: u64, start: usize, stop: usize) -> Result<()> {
+        let slot = *self.id_to_slot.get(&id).ok_or(GeomError::UnknownId(id))?;
+        let inst = self.slots[slot as usize]
+            .as_ref()
+            .ok_or(GeomError::UnknownId(id))?;
+        if inst.closed {
+            return Err(GeomError::InvalidParameter {
+                name: "id",
+                reason: format!("instance {id} is a crossing; trimming applies to polylines"),
+            });
+        }
+        let n = inst.points.len();
+        if stop > n || start + 2 > stop {
+            return Err(GeomError::InvalidParameter {
+                name: "start, stop",
+                reason: format!(
+                    "{start}..{stop} must keep at least 2 of the instance's {n} points"
+                ),
+            });
+        }
+        let points = inst.points[start..stop].to_vec();
+        let last = inst.last_frame;
+        self.commit(slot, id, points, 0, last)
+    }
+
     /// Splices the open polyline `points` into instance `id` ([`crate::splice::splice_polyline`]
     /// with `overlap` metres: the stretch it covers is replaced, the rest kept on either side; a
     /// lane line or kerb by [`crate::splice::splice_line`], which does not fold onto itself),
