@@ -250,13 +250,14 @@ class ChangeDetector:
 
     gmap: the stored city map (read only here); rng: the perception range; covered: a function
     (m, 2) world points -> (m,) bool, whether the stored map covers them (its drives saw them;
-    additions are only looked for there); config: the thresholds."""
+    additions are only looked for there), None to look for no additions (only the stored
+    instances' evidence: ``mapping.verify``); config: the thresholds."""
 
     def __init__(
         self,
         gmap: GlobalMap,
         rng: PerceptionRange,
-        covered: Callable[[NDArray[np.float64]], NDArray[np.bool_]],
+        covered: Callable[[NDArray[np.float64]], NDArray[np.bool_]] | None,
         config: UpdateConfig = UpdateConfig(),
     ) -> None:
         self.gmap, self.rng, self.covered, self.cfg = gmap, rng, covered, config
@@ -319,9 +320,14 @@ class ChangeDetector:
         lab = np.repeat(np.arange(len(dets)), [len(d) for d in dets])  # (Q,)
         tree = cKDTree(q) if len(q) else None
         claim_pts, claim_lab = [], []  # stored points near the range and the detection they claim
+        additions = self.covered is not None
         for _, s in stored:
-            near = in_range_counts(s.points, pose[None], self.rng, margin=-gate) > 0  # (n,)
             expected = in_range_counts(s.points, pose[None], self.rng, cfg.margin) > 0  # (n,)
+            near = (
+                in_range_counts(s.points, pose[None], self.rng, margin=-gate) > 0
+                if additions and tree is not None
+                else np.zeros(len(s.points), bool)
+            )  # (n,)
             if tree is not None and near.any():
                 dist, j = tree.query(s.points[near], distance_upper_bound=gate)  # (m,), (m,)
                 hit = np.isfinite(dist)
@@ -350,7 +356,7 @@ class ChangeDetector:
                 s.obs_idx.append(idx[hit])
                 s.obs_off.append(np.einsum("hk,hk->h", delta, s.normals[idx[hit]]))  # (h,)
                 s.obs_keys.append(key)
-        if not dets:
+        if not dets or not additions:
             return
         owner = cKDTree(np.concatenate(claim_pts)) if claim_pts else None
         owner_lab = np.concatenate(claim_lab) if claim_lab else np.zeros(0, np.int64)
@@ -366,6 +372,8 @@ class ChangeDetector:
         self, key: FrameKey, c: int, pts: NDArray[np.float64], explained: NDArray[np.bool_]
     ) -> None:
         """The unexplained part of a detection (m, 2) as a sighting of a candidate addition."""
+        if self.covered is None:  # no additions looked for
+            return
         free = ~explained & self.covered(pts)  # (m,)
         if c == MapClass.PED_CROSSING:
             if free.mean() < 0.5:

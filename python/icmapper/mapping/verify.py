@@ -54,11 +54,6 @@ class Verdict:
     trimmed: dict[int, tuple[int, int]] = field(default_factory=dict)
 
 
-def _nowhere(points: NDArray[np.float64]) -> NDArray[np.bool_]:
-    """No ground counts as covered: verification looks for no additions."""
-    return np.zeros(len(points), bool)
-
-
 def gather(
     gmap: GlobalMap,
     frames: Iterable[tuple[NDArray[np.float64], Detections]],
@@ -76,7 +71,7 @@ def gather(
         remove_share=config.verify_share,
         min_travel=config.min_travel,
     )
-    evidence = ChangeDetector(gmap, rng, _nowhere, thresholds)
+    evidence = ChangeDetector(gmap, rng, None, thresholds)  # no additions looked for
     for k, (pose, dets) in enumerate(frames):
         evidence.observe((0, k), pose, dets.classes, dets.scores, dets.points)
     return evidence
