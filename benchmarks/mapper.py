@@ -3,7 +3,9 @@
 Runs the full IC-Mapper pipeline (detector, association, tracking, sampling, fusion, merge) over
 synthetic validation sequences with the shipped checkpoint (or a freshly initialised network of a
 config when no checkpoint is given: the timings do not depend on the weights) and prints the mean
-time of every stage and the share of the frame spent outside the networks.
+time of every stage and the share of the frame spent outside the networks; the check of each
+finished map against its drive (``mapping.verify``, as ``map_sequence`` runs it) is a stage of
+its own, per frame of the drive.
 
 The mapper times the detector as one stage; with ``model.instances = "segmentation"`` (the
 shipped checkpoint) that stage includes the vectoriser that turns the masks into instances, which
@@ -25,6 +27,7 @@ from typing import Any
 
 from icmapper.checkpoints import DEFAULT_CHECKPOINT
 from icmapper.mapping.mapper import NETWORK_STAGES, STAGES, Mapper
+from icmapper.mapping.verify import verify_map
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -64,13 +67,19 @@ def main(argv: list[str] | None = None) -> int:
     frames = 0
     render = 0.0
     wall = time.perf_counter()
+    totals[VERIFY] = 0.0
     for seq in seqs:
         mapper.reset()
+        seen = []  # per frame: (pose, detections), what the finished map is checked against
         for i in range(len(seq)):
             t0 = time.perf_counter()
             frame = seq.frame(i)
             render += time.perf_counter() - t0
-            mapper.step(frame)
+            seen.append((frame.pose, mapper.step(frame).detections))
+        t0 = time.perf_counter()
+        if mapper.config.verify:  # what map_sequence does with the finished map
+            verify_map(mapper.finish(), seen, mapper.config, mapper.rng)
+        totals[VERIFY] += time.perf_counter() - t0
         for k, v in mapper.stats.seconds.items():
             totals[k] += v
         frames += mapper.stats.frames
@@ -92,6 +101,8 @@ def main(argv: list[str] | None = None) -> int:
 
 #: The name of the vectoriser's stage in the printout.
 VECTORISER = "vectorise"
+#: The finished map's check against the drive (``mapping.verify``), per frame of the drive.
+VERIFY = "verify"
 
 
 def print_stages(totals: dict[str, float], vectorise_s: float, frames: int) -> float:
@@ -101,6 +112,7 @@ def print_stages(totals: dict[str, float], vectorise_s: float, frames: int) -> f
     step_total = sum(totals.values())
     stages = {"detector": totals["detector"] - vectorise_s, VECTORISER: vectorise_s}
     stages.update((k, totals[k]) for k in STAGES if k != "detector")
+    stages.update((k, v) for k, v in totals.items() if k not in stages and k != "detector")
     print(f"{'stage':<12} {'ms/frame':>9} {'share':>7}")
     for k, v in stages.items():
         print(f"{k:<12} {1e3 * v / frames:9.2f} {v / step_total:7.1%}")
