@@ -252,11 +252,9 @@ impl GlobalMap {
         self.commit(slot, id, stored, 1, frame)
     }
 
-    /// Cuts the polyline instance `id` to its stored points `start..stop` (no resampling), its
-    /// bookkeeping unchanged (no new observation): a clean-up of a finished map cutting off
-    /// ends the drive did not back. Errors on an unknown id, a crossing (closed) instance, or a
-    /// range out of bounds or of fewer than 2 points; the instance is then unchanged.
-    pub fn trim(&mut self, id: u64, start: usize, stop: usize) -> Result<()> {
+    /// The slot and instance of polyline `id`; errors on an unknown id or a crossing (`doing`
+    /// names the operation in the error).
+    fn polyline(&self, id: u64, doing: &str) -> Result<(u32, &Instance)> {
         let slot = *self.id_to_slot.get(&id).ok_or(GeomError::UnknownId(id))?;
         let inst = self.slots[slot as usize]
             .as_ref()
@@ -264,9 +262,18 @@ impl GlobalMap {
         if inst.closed {
             return Err(GeomError::InvalidParameter {
                 name: "id",
-                reason: format!("instance {id} is a crossing; trimming applies to polylines"),
+                reason: format!("instance {id} is a crossing; {doing} applies to polylines"),
             });
         }
+        Ok((slot, inst))
+    }
+
+    /// Cuts the polyline instance `id` to its stored points `start..stop` (no resampling), its
+    /// bookkeeping unchanged (no new observation): a clean-up of a finished map cutting off
+    /// ends the drive did not back. Errors on an unknown id, a crossing (closed) instance, or a
+    /// range out of bounds or of fewer than 2 points; the instance is then unchanged.
+    pub fn trim(&mut self, id: u64, start: usize, stop: usize) -> Result<()> {
+        let (slot, inst) = self.polyline(id, "trimming")?;
         let n = inst.points.len();
         if stop > n || start + 2 > stop {
             return Err(GeomError::InvalidParameter {
@@ -288,16 +295,7 @@ impl GlobalMap {
     /// Errors on an unknown id, a crossing (closed) instance, bad geometry or a bad `overlap`; the
     /// instance is then unchanged.
     pub fn splice(&mut self, id: u64, points: &[Point], overlap: f64, frame: i64) -> Result<()> {
-        let slot = *self.id_to_slot.get(&id).ok_or(GeomError::UnknownId(id))?;
-        let inst = self.slots[slot as usize]
-            .as_ref()
-            .ok_or(GeomError::UnknownId(id))?;
-        if inst.closed {
-            return Err(GeomError::InvalidParameter {
-                name: "id",
-                reason: format!("instance {id} is a crossing; splicing applies to polylines"),
-            });
-        }
+        let (slot, inst) = self.polyline(id, "splicing")?;
         let spliced = match inst.class.fold() {
             Some(fold) => crate::splice::splice_line(&inst.points, points, overlap, fold)?,
             None => crate::splice::splice_polyline(&inst.points, points, overlap)?,
