@@ -183,6 +183,19 @@ def test_every_method_verifies_its_map_and_only_when_asked(drive: Sequence, name
     assert counts[True] == (counts[False][0] - 1, 0)  # and only it goes
 
 
+def test_a_drive_without_frames_or_detections_removes_nothing_it_never_saw() -> None:
+    """No frames: nothing was in view, nothing goes. Frames without detections: the instances in
+    view are missed (the lane line, the stray), the edge piece (in view in one frame) stays."""
+    gm, ids = _map()
+    assert check(gm, [], MapperConfig(), RANGE_60x30).removed == []
+    empty = [(pose(i), Detections.empty()) for i in range(FRAMES)]
+    assert removed(empty, MapperConfig()) == sorted([ids["lane"], ids["stray"]])
+    assert (
+        len(GlobalMap()) == 0
+        and verify_map(GlobalMap(), empty, MapperConfig(), RANGE_60x30).removed == []
+    )
+
+
 def test_verify_settings_are_checked() -> None:
     with pytest.raises(ValueError, match="verify_share"):
         MapperConfig(verify_share=0.0)
