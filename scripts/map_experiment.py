@@ -44,6 +44,14 @@ def _parse_sets(items: list[str], cls: type) -> dict[str, Any]:
     return table
 
 
+def bev_cache_dir(root: str, checkpoint: str, source: str, hz: float | None = None) -> Path:
+    """The folder of ``CachedBev``'s encoder outputs for one checkpoint file (by its bytes) and
+    source (and keyframe rate, when not the source's own)."""
+    weights = hashlib.sha1(Path(checkpoint).read_bytes()).hexdigest()
+    rate = f"|{hz}" if hz is not None else ""
+    return Path(root) / hashlib.sha1(f"{weights}|{source}{rate}".encode()).hexdigest()[:10]
+
+
 class CachedBev:
     """The learned detector as a ``DetectionSource`` whose encoder output is cached per frame."""
 
@@ -219,10 +227,7 @@ def main(argv: list[str] | None = None) -> int:
     seqs = open_source(a.source, image_size=checkpoint_settings(a.checkpoint)[1])
     if a.stop:
         seqs = [with_stop(s, a.stop, a.stop_at) for s in seqs]
-    weights = hashlib.sha1(Path(a.checkpoint).read_bytes()).hexdigest()
-    rate = f"|{a.hz}" if a.hz is not None else ""
-    key = hashlib.sha1(f"{weights}|{a.source}{rate}".encode()).hexdigest()[:10]
-    cache = Path(a.cache) / key
+    cache = bev_cache_dir(a.cache, a.checkpoint, a.source, a.hz)
     mapper = Mapper.from_checkpoint(a.checkpoint)
     cfg = MapperConfig.from_dict(_parse_sets(a.set, MapperConfig), mapper.config)
     mapper = Mapper.from_checkpoint(a.checkpoint, config=cfg)

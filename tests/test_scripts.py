@@ -116,3 +116,28 @@ def test_diagnose_gap_finds_a_kerb_round_an_island() -> None:
     assert d.min() < 1e-9 and 2.4 < d.max() < 2.6  # sample to sample
     np.testing.assert_allclose(mod.coverage(side, [side]), 0.0, atol=1e-9)
     assert np.isinf(mod.coverage(side, [])).all()
+
+
+def test_plot_verify_draws_kept_removed_and_cut(tmp_path: Path) -> None:
+    """scripts/plot_verify.py's picture from a hand-made map and verdict: a PNG is written
+    atomically (nothing else left in the folder) and names the verdict's counts in its title."""
+    from types import SimpleNamespace
+
+    import numpy as np
+    from icmapper import GlobalMap
+    from icmapper.mapping.verify import Verdict
+
+    mod = _script("plot_verify")
+    gm = GlobalMap()
+    line = np.stack([np.arange(0.0, 30.0), np.zeros(30)], -1)  # (30, 2)
+    kept = gm.insert(1, line)
+    gone = gm.insert(1, line + [0.0, 6.0])
+    ring = gm.insert(0, np.array([[5.0, 3.0], [9.0, 3.0], [9.0, 5.0], [5.0, 5.0]]))
+    verdict = Verdict(removed=[gone], trimmed={kept: (3, 25)})
+    gt = [SimpleNamespace(points=line, closed=False)]
+    poses = np.tile(np.eye(4), (5, 1, 1))  # (5, 4, 4)
+    poses[:, 0, 3] = np.arange(5.0) * 5
+    title = mod.draw(gm, verdict, gt, poses, tmp_path / "v.png", "hand-made")
+    assert [p.name for p in tmp_path.iterdir()] == ["v.png"]
+    assert (tmp_path / "v.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert "1 instances removed, 1 with ends cut" in title and ring in gm.ids().tolist()
