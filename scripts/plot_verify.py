@@ -77,8 +77,7 @@ def draw(gmap, verdict, gt, poses, out: Path, name: str) -> str:  # noqa: ANN001
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    from icmapper.atomic import atomic_path
-    from icmapper.mapping.plot import CLASS_COLOURS
+    from icmapper.mapping.plot import CLASS_COLOURS, save_figure
 
     xy = np.concatenate([np.asarray(g.points) for g in gt] + [np.asarray(poses)[:, :2, 3]])
     w, h = np.ptp(xy, axis=0) + 20.0  # metres, with a margin
@@ -123,11 +122,7 @@ def draw(gmap, verdict, gt, poses, out: Path, name: str) -> str:  # noqa: ANN001
     )
     ax.set_title(title)
     fig.tight_layout()
-    try:
-        with atomic_path(out) as tmp:
-            fig.savefig(tmp, dpi=110)
-    finally:
-        plt.close(fig)
+    save_figure(fig, out)
     return title
 
 

@@ -71,8 +71,16 @@ def plot_global_maps(
     if title:
         fig.suptitle(title)
     fig.tight_layout()
+    save_figure(fig, out_path)
+
+
+def save_figure(fig: Any, out_path: str | os.PathLike, dpi: int = 110) -> None:
+    """Writes matplotlib figure ``fig`` to ``out_path`` (a PNG) atomically and closes it, also
+    when the write fails."""
+    import matplotlib.pyplot as plt
+
     try:
         with atomic_path(out_path) as tmp:
-            fig.savefig(tmp, dpi=110)
+            fig.savefig(tmp, dpi=dpi)
     finally:
         plt.close(fig)
