@@ -27,7 +27,7 @@ from typing import Any
 
 from icmapper.checkpoints import DEFAULT_CHECKPOINT
 from icmapper.mapping.mapper import NETWORK_STAGES, STAGES, Mapper
-from icmapper.mapping.verify import verify_map
+from icmapper.mapping.verify import check
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -78,7 +78,8 @@ def main(argv: list[str] | None = None) -> int:
             seen.append((frame.pose, mapper.step(frame).detections))
         t0 = time.perf_counter()
         if mapper.config.verify:  # what map_sequence does with the finished map
-            verify_map(mapper.finish(), seen, mapper.config, mapper.rng)
+            gmap = mapper.finish()
+            check(gmap, seen, mapper.config, mapper.rng).apply(gmap)
         totals[VERIFY] += time.perf_counter() - t0
         for k, v in mapper.stats.seconds.items():
             totals[k] += v

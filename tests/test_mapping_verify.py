@@ -15,7 +15,7 @@ from icmapper.mapping.mapper import Mapper
 from icmapper.mapping.methods import method
 from icmapper.mapping.run import map_sequence
 from icmapper.mapping.types import Detections
-from icmapper.mapping.verify import MIN_TRIM, check, verify_map
+from icmapper.mapping.verify import MIN_TRIM, check
 
 #: The car drives along y = 0 from x = 0, 3 m per frame, 8 frames.
 STEP, FRAMES = 3.0, 8
@@ -109,7 +109,7 @@ def test_an_instance_the_drive_does_not_back_is_removed() -> None:
     # in view in one frame, stays
     weak = [(p, replace(d, scores=np.full(len(d.scores), 0.3, np.float32))) for p, d in _frames()]
     assert removed(weak, cfg) == sorted([ids["lane"], ids["stray"]])
-    verdict = verify_map(gm, _frames(), cfg, RANGE_60x30)
+    verdict = check(gm, _frames(), cfg, RANGE_60x30).apply(gm)
     assert verdict.removed == [ids["stray"]] and verdict.trimmed == {}
     assert sorted(int(i) for i in gm.ids()) == sorted([ids["lane"], ids["edge"]])
 
@@ -125,7 +125,7 @@ def test_a_line_drawn_past_what_is_there_loses_the_unbacked_end() -> None:
         before = np.asarray(gm.get(lane)[1])
         obs = gm.info(lane)["observations"]
         frames = [(_at(-50.0 + STEP * i), _seen_from(-50.0 + STEP * i)) for i in range(FRAMES)]
-        verdict = verify_map(gm, frames, MapperConfig(), RANGE_60x30)
+        verdict = check(gm, frames, MapperConfig(), RANGE_60x30).apply(gm)
         after = np.asarray(gm.get(lane)[1])
         assert verdict.removed == []
         if cut:
@@ -192,8 +192,24 @@ def test_a_drive_without_frames_or_detections_removes_nothing_it_never_saw() -> 
     assert removed(empty, MapperConfig()) == sorted([ids["lane"], ids["stray"]])
     assert (
         len(GlobalMap()) == 0
-        and verify_map(GlobalMap(), empty, MapperConfig(), RANGE_60x30).removed == []
+        and check(GlobalMap(), empty, MapperConfig(), RANGE_60x30).removed == []
     )
+
+
+def test_bad_frames_are_refused_naming_the_frame() -> None:
+    gm, _ = _map()
+    bad_pose = _frames()
+    bad_pose[2] = (np.full((4, 4), np.nan), bad_pose[2][1])
+    with pytest.raises(ValueError, match="frame 2: the pose"):
+        check(gm, bad_pose, MapperConfig(), RANGE_60x30)
+    d = detections(1)
+    nan = replace(d, points=np.where(np.isnan(d.points), 0, np.nan).astype(np.float32))
+    with pytest.raises(ValueError, match="frame 1: detection points must be finite"):
+        check(gm, [(pose(0), detections(0)), (pose(1), nan)], MapperConfig(), RANGE_60x30)
+    flat = replace(d, points=d.points.reshape(len(d.classes), -1))
+    with pytest.raises(ValueError, match="frame 0: detection points must be"):
+        check(gm, [(pose(0), flat)], MapperConfig(), RANGE_60x30)
+    assert len(gm) == 3  # nothing removed
 
 
 def test_verify_settings_are_checked() -> None:

@@ -356,7 +356,7 @@ def map_sequence(
     method's config asks."""
     from icmapper.eval.runfmt import FramePredictions
     from icmapper.mapping.map_nms import map_nms
-    from icmapper.mapping.verify import verify_map
+    from icmapper.mapping.verify import check
 
     if reset:
         method.reset()
@@ -385,7 +385,7 @@ def map_sequence(
             on_frame(i + 1, len(seq))
     gmap = method.finish()
     if method.config.verify:
-        verify_map(gmap, seen, method.config, method.rng, keep)
+        check(gmap, seen, method.config, method.rng, keep).apply(gmap)
     if method.config.map_nms:
         map_nms(gmap, method.config)
     return frames, gmap

@@ -53,6 +53,14 @@ class Verdict:
     removed: list[int] = field(default_factory=list)
     trimmed: dict[int, tuple[int, int]] = field(default_factory=dict)
 
+    def apply(self, gmap: GlobalMap) -> Verdict:
+        """Removes and cuts in ``gmap`` what the verdict names; returns the verdict."""
+        for i in self.removed:
+            gmap.remove(i)
+        for i, (a, b) in self.trimmed.items():
+            gmap.trim(i, a, b)
+        return self
+
 
 def gather(
     gmap: GlobalMap,
@@ -61,7 +69,9 @@ def gather(
     rng: PerceptionRange,
 ) -> ChangeDetector:
     """The evidence of the drive's ``frames`` ((4, 4) ego -> world pose, the frame's
-    detections) on every instance of ``gmap`` (a city update's, ``city.update``)."""
+    detections) on every instance of ``gmap`` (a city update's, ``city.update``). ValueError
+    naming the frame for a pose that is not a finite (4, 4) matrix or detections whose points
+    are not (k, n, 2) finite values."""
     from icmapper.city.update import ChangeDetector, UpdateConfig
 
     thresholds = replace(
@@ -73,7 +83,15 @@ def gather(
     )
     evidence = ChangeDetector(gmap, rng, None, thresholds)  # no additions looked for
     for k, (pose, dets) in enumerate(frames):
-        evidence.observe((0, k), pose, dets.classes, dets.scores, dets.points)
+        pose = np.asarray(pose, np.float64)
+        pts = np.asarray(dets.points)
+        if pose.shape != (4, 4) or not np.isfinite(pose).all():
+            raise ValueError(f"frame {k}: the pose must be a finite (4, 4) matrix")
+        if pts.ndim != 3 or pts.shape[0] != len(dets.classes) or pts.shape[-1] != 2:
+            raise ValueError(f"frame {k}: detection points must be (k, n, 2), got {pts.shape}")
+        if not np.isfinite(pts).all():
+            raise ValueError(f"frame {k}: detection points must be finite")
+        evidence.observe((0, k), pose, dets.classes, dets.scores, pts)
     return evidence
 
 
@@ -113,20 +131,4 @@ def check(
             a, b = _kept_stretch(s, config)
             if (a, b) != (0, len(s.points)) and b - a >= 2:
                 verdict.trimmed[i] = (a, b)
-    return verdict
-
-
-def verify_map(
-    gmap: GlobalMap,
-    frames: Iterable[tuple[NDArray[np.float64], Detections]],
-    config: MapperConfig,
-    rng: PerceptionRange,
-    keep: Collection[int] = (),
-) -> Verdict:
-    """Applies ``check``'s verdict to ``gmap`` (removes, cuts the ends) and returns it."""
-    verdict = check(gmap, frames, config, rng, keep)
-    for i in verdict.removed:
-        gmap.remove(i)
-    for i, (a, b) in verdict.trimmed.items():
-        gmap.trim(i, a, b)
     return verdict
