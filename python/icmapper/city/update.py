@@ -26,7 +26,9 @@ Decisions (``decide``), from all frames of all drives observed:
 - removed: an instance expected in >= ``remove_frames`` frames and missed in at least
   ``remove_share`` of them; or, with a ``reference`` (below) and for the classes with a finite
   ``remove_drop``, one that did not move and was missed at ``remove_gate`` (a tighter gate) in a
-  share of its frames at least ``remove_drop`` above the reference's share;
+  share of its frames at least ``remove_drop`` above the reference's share, a rise the frames
+  counted make significant (a one-sided two-proportion z-test at ``remove_z``: 4 misses in 8
+  frames against the reference's 2 in 8 are not evidence enough);
 - moved (polylines): stored points with >= ``move_obs`` offsets whose median is beyond
   ``move_threshold`` (the noise; per class), in a run of >= ``move_length`` m (per class); when
   the run holds most of the observed points the whole line moves by the run's median, else the
@@ -88,6 +90,7 @@ class UpdateConfig:
     remove_share: float = 0.8
     remove_drop: tuple[float, float, float] = (np.inf, 0.25, np.inf)  # per class
     remove_gate: float = 1.0
+    remove_z: float = 1.645  # one-sided 5 % (twenty-fourth round; 0: no test)
     move_threshold: tuple[float, float, float] = (np.inf, 0.4, 1.0)  # per class
     move_obs: int = 3
     move_length: tuple[float, float, float] = (np.inf, 6.0, 8.0)  # per class (lane lines: 4 m
@@ -103,7 +106,14 @@ class UpdateConfig:
             raise ValueError(
                 f"UpdateConfig.remove_drop must be 3 values > 0, got {self.remove_drop}"
             )
-        for name in ("margin", "min_add_length", "add_gate", "remove_gate", "min_travel"):
+        for name in (
+            "margin",
+            "min_add_length",
+            "add_gate",
+            "remove_gate",
+            "remove_z",
+            "min_travel",
+        ):
             v = getattr(self, name)
             if not (np.isfinite(v) and v >= 0):
                 raise ValueError(f"UpdateConfig.{name} must be finite and >= 0, got {v}")
@@ -447,14 +457,20 @@ class ChangeDetector:
         """Whether ``s`` was missed (nothing within ``remove_gate``) in a share of its frames at
         least ``remove_drop`` (its class's) above the share in which the reference, the same
         detector on the city's own drives, missed it: a detector that still draws a removed line
-        in some frames, from the lanes around it, misses it more often than before."""
+        in some frames, from the lanes around it, misses it more often than before. The rise
+        must also be ``remove_z`` standard errors or more (the pooled two-proportion test): an
+        instance in view in a few frames misses a share 0.25 higher by chance."""
         drop = self.cfg.remove_drop[s.cls]
         if ref is None or not np.isfinite(drop):
             return False
         k = self.cfg.remove_frames
-        if len(ref.evidence.expected) < k or s.near_missed < k:
+        n, m = len(s.evidence.expected), len(ref.evidence.expected)
+        if m < k or s.near_missed < k:
             return False
-        return s.near_missed_share() - ref.near_missed_share() >= drop
+        rise = s.near_missed_share() - ref.near_missed_share()
+        pooled = (s.near_missed + ref.near_missed) / (n + m)
+        spread = np.sqrt(pooled * (1.0 - pooled) * (1.0 / n + 1.0 / m))  # the rise's std. error
+        return rise >= drop and rise >= self.cfg.remove_z * spread
 
     def _median_offsets(self, s: Stored) -> NDArray[np.float64]:
         """(n,) the median sideways offset of each stored point observed in >= ``move_obs``
