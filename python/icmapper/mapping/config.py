@@ -90,6 +90,13 @@ class MapperConfig:
     detect_threshold: float = _f(0.1, "score of detections reported per frame (evaluated by AP)")
     track_threshold: float = _f(0.4, "score of detections tracked, fused and merged into the map")
     assoc_threshold: float = _f(0.5, "θ: minimum association score of a match")
+    assign_cover: float = _f(
+        1.0,
+        "metres; positional association (no learned head): the assignment weighs each "
+        "admissible pair by how much the detection and the track's last view lie on each other "
+        "within this, so of two pieces lying on a track the one sharing more of it continues it "
+        "(0: the scores alone)",
+    )
     min_hits: int = _f(2, "frames a new track must be seen before it enters the global map")
     confirm_score: float = _f(
         0.7, "detection score at which a new track enters the global map at once (min_hits: 1)"
@@ -185,7 +192,7 @@ class MapperConfig:
             if getattr(self, name) < 1:
                 raise ValueError(f"MapperConfig.{name} must be >= 1, got {getattr(self, name)}")
         for name in ("max_age", "reid_distance", "beside_gate", "fusion_margin", "smoothing",
-                     "merge_behind", "stub_length"):  # fmt: skip
+                     "merge_behind", "stub_length", "assign_cover"):  # fmt: skip
             if not getattr(self, name) >= 0:
                 raise ValueError(f"MapperConfig.{name} must be >= 0, got {getattr(self, name)}")
         if not 0.0 <= self.min_travel < float("inf"):

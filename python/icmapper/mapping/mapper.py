@@ -117,7 +117,9 @@ class Mapper:
         self.rng = rng
         self.device = device
         self.name = name
-        self.tracker = Tracker(self.config.assoc_threshold, self.config.max_age)
+        positional = self.association is None or not self.config.use_association
+        cover = self.config.assign_cover if positional else 0.0  # the learned scores as they are
+        self.tracker = Tracker(self.config.assoc_threshold, self.config.max_age, cover)
         self.crossings = CrossingMerger(self.config.crossing_merge, rng)
         self._new_map()
         self.stats = MapperStats()

@@ -121,11 +121,14 @@ def match_scores(
     det_classes: NDArray[np.integer],
     trk_classes: NDArray[np.integer],
     threshold: float,
+    weights: NDArray[np.floating] | None = None,
 ) -> NDArray[np.int64]:
     """One-to-one assignment maximising the summed score over admissible pairs.
 
     scores (k, t) in [0, 1]; a pair is admissible when score >= threshold and the classes agree.
-    Returns (k,) int64: the matched column of each detection, -1 where unmatched.
+    weights (k, t) >= 0: what the assignment maximises over the admissible pairs instead of the
+    scores (``Tracker``'s coverage). Returns (k,) int64: the matched column of each detection, -1
+    where unmatched.
     """
     scores = np.asarray(scores, dtype=np.float64)
     det_classes = np.asarray(det_classes, dtype=np.int64)
@@ -147,10 +150,42 @@ def match_scores(
     ok = (scores >= threshold) & (det_classes[:, None] == trk_classes[None, :])  # (k, t)
     # Inadmissible pairs weigh 0: scores are >= 0, so the best full assignment restricted to its
     # admissible pairs is a best admissible matching (and vice versa).
-    weight = np.where(ok, scores, 0.0)  # (k, t)
+    if weights is not None and np.shape(weights) != (k, t):
+        raise ValueError(f"association weights must be ({k}, {t}), got {np.shape(weights)}")
+    weight = np.where(ok, scores if weights is None else weights, 0.0)  # (k, t)
     rows, cols = linear_sum_assignment(weight, maximize=True)
     keep = ok[rows, cols]
     out[rows[keep]] = cols[keep]
+    return out
+
+
+#: The weight an admissible pair keeps however little its detection and track share.
+COVER_FLOOR = 0.05
+
+
+def overlap(
+    det_points: NDArray[np.floating],
+    det_classes: NDArray[np.integer],
+    trk_points: NDArray[np.floating],
+    trk_classes: NDArray[np.integer],
+    gate: float,
+) -> NDArray[np.float64]:
+    """(k, t): how much of each detection (k, n, 2) and each track's view (t, n, 2) lie on each
+    other, both in one frame: the smaller of the share of the track's points within ``gate``
+    metres of the detection's polyline and the share of the detection's points within it of the
+    track's (crossings, class 0, as rings): about the length they share over the longer one's.
+    0 across classes."""
+    out = np.zeros((len(det_classes), len(trk_classes)), np.float64)  # (k, t)
+    det_points = np.asarray(det_points, np.float64)
+    trk_points = np.asarray(trk_points, np.float64)
+    for c in np.intersect1d(det_classes, trk_classes):
+        di, ti = np.nonzero(det_classes == c)[0], np.nonzero(trk_classes == c)[0]
+        closed_d, closed_t = np.full(len(di), c == 0), np.full(len(ti), c == 0)
+        seg_d = polyline_segments(det_points[di], closed_d)  # (k_c, n, 2, 2)
+        seg_t = polyline_segments(trk_points[ti], closed_t)  # (t_c, n, 2, 2)
+        trk_on = (point_to_segments(trk_points[ti], seg_d) <= gate).mean(axis=2)  # (t_c, k_c)
+        det_on = (point_to_segments(det_points[di], seg_t) <= gate).mean(axis=2)  # (k_c, t_c)
+        out[np.ix_(di, ti)] = np.minimum(trk_on.T, det_on)
     return out
 
 
@@ -158,16 +193,23 @@ class Tracker:
     """Inference association with a tracking buffer (state lives in the instance, no globals).
 
     threshold: minimum score θ of an accepted match; max_age: a track unseen for more than this many
-    consecutive frames is dropped (0: tracks live one frame only).
+    consecutive frames is dropped (0: tracks live one frame only); cover_gate: metres, > 0 to
+    weigh each admissible pair by how much the detection and the track's last view share
+    (``overlap``): where the range edge cuts a track's line into a long piece and a corner
+    piece, both lie on the track, and the long one continues it; a short piece lying on a long
+    line takes the short track, not the long one (0: the scores alone).
     """
 
-    def __init__(self, threshold: float = 0.5, max_age: int = 3) -> None:
+    def __init__(self, threshold: float = 0.5, max_age: int = 3, cover_gate: float = 0.0) -> None:
         if not 0.0 <= threshold <= 1.0:
             raise ValueError(f"Tracker: threshold must be in [0, 1], got {threshold}")
         if max_age < 0:
             raise ValueError(f"Tracker: max_age must be >= 0, got {max_age}")
+        if not (np.isfinite(cover_gate) and cover_gate >= 0):
+            raise ValueError(f"Tracker: cover_gate must be finite and >= 0, got {cover_gate}")
         self.threshold = float(threshold)
         self.max_age = int(max_age)
+        self.cover_gate = float(cover_gate)
         self._tracks: list[Track] = []
         self._next_id = 0
 
@@ -251,7 +293,12 @@ class Tracker:
                     f"Tracker.assign: det_queries must be ({k}, D), got {det_queries.shape}"
                 )
         trk_classes = np.array([tr.cls for tr in self._tracks], np.int64)  # (t,)
-        cols = match_scores(scores, det_classes, trk_classes, self.threshold)  # (k,)
+        weights = None
+        if self.cover_gate > 0 and k and self._tracks:
+            trk_pts = np.stack([world_to_ego(tr.points, pose) for tr in self._tracks])  # (t, n, 2)
+            shared = overlap(det_points, det_classes, trk_pts, trk_classes, self.cover_gate)
+            weights = np.asarray(scores, np.float64) * (COVER_FLOOR + shared)  # (k, t)
+        cols = match_scores(scores, det_classes, trk_classes, self.threshold, weights)  # (k,)
 
         ids = np.empty(k, np.int64)
         seen: set[int] = set()
