@@ -14,6 +14,7 @@ from icmapper.mapping.tracker import (
     overlap,
     polyline_chamfer_matrix,
     positional_affinity,
+    positional_scores,
 )
 
 
@@ -75,7 +76,7 @@ def test_the_piece_covering_more_of_a_track_continues_it() -> None:
     """The range edge cuts a track's line (x -20..20) into a long piece drawn 0.4 m off and a
     short piece at one end lying exactly on it. By the positional score alone (the smaller
     directed distance) the short piece takes the track; weighed by how much each shares with
-    the track (``cover_gate``), the long one keeps it and the short piece opens a new track."""
+    the track (``overlap``), the long one keeps it and the short piece opens a new track."""
     pose = np.eye(4)
     track = _span(-20.0, 20.0, 0.0)[None]  # (1, 20, 2)
     dets = np.stack([_span(-20.0, 12.0, 0.4), _span(14.0, 20.0, 0.0)])  # (2, 20, 2)
@@ -84,13 +85,14 @@ def test_the_piece_covering_more_of_a_track_continues_it() -> None:
     assert scores[1, 0] > scores[0, 0] > 0.5
     shared = overlap(dets, cls, track, np.array([2]), 1.0)
     assert shared[0, 0] == pytest.approx(0.8, abs=0.06) and shared[1, 0] <= 0.25
-    for gate, continued in ((0.0, 1), (1.0, 0)):
-        tr = Tracker(threshold=0.5, max_age=3, cover_gate=gate)
+    both, from_both = positional_scores(dets, cls, track, np.array([2]), 1.5, "min", 1.0)
+    np.testing.assert_array_equal(both, scores)  # one pass gives both
+    np.testing.assert_array_equal(from_both, shared)
+    for weigh, continued in ((None, 1), (shared, 0)):
+        tr = Tracker(threshold=0.5, max_age=3)
         tr.assign(np.zeros((1, 0)), np.array([2]), track, pose)  # track 0
-        ids = tr.assign(scores, cls, dets, pose)
+        ids = tr.assign(scores, cls, dets, pose, shared=weigh)
         assert ids[continued] == 0 and ids[1 - continued] == 1
-    with pytest.raises(ValueError, match="cover_gate"):
-        Tracker(cover_gate=-1.0)
     with pytest.raises(ValueError, match="weights"):
         match_scores(scores, cls, np.array([2]), 0.5, weights=np.ones((1, 1)))
 

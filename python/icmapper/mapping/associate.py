@@ -2,8 +2,9 @@
 mapper's pipeline, before the tracker's one-to-one assignment).
 
 Learned scores ``H`` of the association head when both sides carry query features, positional
-affinity otherwise. Scores only: the assignment and the buffer are the tracker's
-(``mapping.tracker``). No I/O.
+affinity otherwise (with what each pair shares, ``tracker.overlap``, for the assignment to weigh
+the pairs by). Scores only: the assignment and the buffer are the tracker's (``mapping.tracker``).
+No I/O.
 """
 
 from __future__ import annotations
@@ -14,7 +15,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
-from icmapper.mapping.tracker import positional_affinity
+from icmapper.mapping.tracker import positional_scores
 from icmapper.mapping.types import Detections
 
 if TYPE_CHECKING:
@@ -33,13 +34,16 @@ def association_scores(
     to_unit: Callable[[torch.Tensor], torch.Tensor] | None,
     device: str | torch.device,
     positional_scale: float,
-) -> NDArray[np.float64]:
+    share_gate: float = 0.0,
+) -> tuple[NDArray[np.float64], NDArray[np.float64] | None]:
     """Scores (k, t) of the k detections against the t tracks (classes (t,), points (t, P, 2)
-    ego, queries (t, D) or None). ``head`` (None: positional affinity) scores the pairs when the
-    detections and the tracks carry queries; ``to_unit`` maps metres to the head's unit frame."""
+    ego, queries (t, D) or None), and what each pair shares (k, t) where the scores are
+    positional and ``share_gate`` > 0 (``tracker.overlap`` at that gate; else None). ``head``
+    (None: positional affinity) scores the pairs when the detections and the tracks carry
+    queries; ``to_unit`` maps metres to the head's unit frame."""
     k, t = len(det), len(trk_cls)
     if k == 0 or t == 0:
-        return np.zeros((k, t), np.float64)
+        return np.zeros((k, t), np.float64), None
     if head is not None and det.queries is not None and trk_q is not None:
         import torch
 
@@ -53,12 +57,13 @@ def association_scores(
                 torch.as_tensor(trk_q, device=device),
                 to_unit(torch.as_tensor(trk_pts, device=device)),
             )  # (k, t)
-        return s.cpu().numpy().astype(np.float64)
-    return positional_affinity(
+        return s.cpu().numpy().astype(np.float64), None
+    return positional_scores(
         det.points,
         det.classes,
         trk_pts,
         trk_cls,
         scale=positional_scale,
         reduce="min",  # instances grow and shrink at the range edge
+        share_gate=share_gate,
     )

@@ -117,9 +117,7 @@ class Mapper:
         self.rng = rng
         self.device = device
         self.name = name
-        positional = self.association is None or not self.config.use_association
-        cover = self.config.assign_cover if positional else 0.0  # the learned scores as they are
-        self.tracker = Tracker(self.config.assoc_threshold, self.config.max_age, cover)
+        self.tracker = Tracker(self.config.assoc_threshold, self.config.max_age)
         self.crossings = CrossingMerger(self.config.crossing_merge, rng)
         self._new_map()
         self.stats = MapperStats()
@@ -339,7 +337,7 @@ class Mapper:
         _, trk_cls, trk_pts, trk_q = self.tracker.tracks_in_ego(pose)
         head = self.association if self.config.use_association else None
         detector: Any = getattr(self.source, "detector", None)
-        scores = association_scores(
+        scores, shared = association_scores(
             det,
             trk_cls,
             trk_pts,
@@ -348,9 +346,10 @@ class Mapper:
             to_unit=getattr(detector, "to_unit", None),
             device=self.device,
             positional_scale=self.config.positional_scale,
-        )  # (k, t)
+            share_gate=self.config.assign_cover,  # positional scores only: the learned as they are
+        )  # (k, t), (k, t) or None
         t1 = time.perf_counter()
-        ids = self.tracker.assign(scores, det.classes, det.points, pose, det.queries)
+        ids = self.tracker.assign(scores, det.classes, det.points, pose, det.queries, shared)
         self.stats.seconds["association"] += t1 - t0
         self.stats.seconds["tracking"] += time.perf_counter() - t1
         return ids

@@ -14,6 +14,7 @@ any later ego frame (`Tracker.tracks_in_ego`). This module holds no network and 
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from dataclasses import dataclass
 
 import numpy as np
@@ -68,13 +69,53 @@ def polyline_chamfer_matrix(
         )
     if a.shape[0] == 0 or b.shape[0] == 0:
         return np.zeros((a.shape[0], b.shape[0]), np.float64)
+    ab, ba = _point_distances(a, b, a_closed, b_closed)
+    return _reduce(ab.mean(axis=2), ba.mean(axis=2), reduce)
+
+
+def _point_distances(
+    a: NDArray[np.float64],
+    b: NDArray[np.float64],
+    a_closed: NDArray[np.bool_],
+    b_closed: NDArray[np.bool_],
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """The distance of each of a's points to each of b's lines (A, B, n) and of each of b's
+    points to each of a's lines (B, A, m); a (A, n, 2), b (B, m, 2) float64."""
     sa = polyline_segments(a, np.asarray(a_closed, bool))  # (A, n, 2, 2)
     sb = polyline_segments(b, np.asarray(b_closed, bool))  # (B, m, 2, 2)
-    ab = point_to_segments(a, sb).mean(axis=2)  # (A, B)
-    ba = point_to_segments(b, sa).mean(axis=2)  # (B, A)
+    return point_to_segments(a, sb), point_to_segments(b, sa)
+
+
+def _reduce(ab: NDArray[np.float64], ba: NDArray[np.float64], reduce: str) -> NDArray[np.float64]:
+    """(A, B) from the directed means ab (A, B) and ba (B, A): their mean, or the smaller."""
     if reduce == "min":
         return np.minimum(ab, ba.T)
     return 0.5 * (ab + ba.T)
+
+
+def _same_class_blocks(
+    det_points: NDArray[np.floating],
+    det_classes: NDArray[np.integer],
+    trk_points: NDArray[np.floating],
+    trk_classes: NDArray[np.integer],
+) -> Iterator[
+    tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.float64], NDArray[np.float64]]
+]:
+    """Per class present on both sides: the detections' and tracks' rows (k_c,), (t_c,) and
+    the point distances between them (``_point_distances``: (k_c, t_c, n), (t_c, k_c, m);
+    crossings, class 0, as rings)."""
+    det_classes, trk_classes = np.asarray(det_classes), np.asarray(trk_classes)
+    det_points = np.asarray(det_points, np.float64)
+    trk_points = np.asarray(trk_points, np.float64)
+    if det_points.shape[:1] != det_classes.shape or trk_points.shape[:1] != trk_classes.shape:
+        raise ValueError(
+            f"positional_affinity: points {det_points.shape} / classes {det_classes.shape}, "
+            f"points {trk_points.shape} / classes {trk_classes.shape} disagree"
+        )
+    for c in np.intersect1d(det_classes, trk_classes):  # only same-class pairs are computed
+        di, ti = np.nonzero(det_classes == c)[0], np.nonzero(trk_classes == c)[0]
+        closed_d, closed_t = np.full(len(di), c == 0), np.full(len(ti), c == 0)
+        yield di, ti, *_point_distances(det_points[di], trk_points[ti], closed_d, closed_t)
 
 
 def positional_affinity(
@@ -92,28 +133,37 @@ def positional_affinity(
     (`polyline_chamfer_matrix`; crossings, class 0, as rings). A Chamfer gate of g metres is the
     score threshold exp(-g / scale). ``reduce``: see `polyline_chamfer_matrix`.
     """
+    return positional_scores(det_points, det_classes, trk_points, trk_classes, scale, reduce)[0]
+
+
+def positional_scores(
+    det_points: NDArray[np.floating],
+    det_classes: NDArray[np.integer],
+    trk_points: NDArray[np.floating],
+    trk_classes: NDArray[np.integer],
+    scale: float = DEFAULT_AFFINITY_SCALE,
+    reduce: str = "mean",
+    share_gate: float = 0.0,
+) -> tuple[NDArray[np.float64], NDArray[np.float64] | None]:
+    """`positional_affinity` (k, t) and, for ``share_gate`` > 0, `overlap` (k, t) at that gate
+    from the same point distances (None otherwise)."""
     if reduce not in ("mean", "min"):
         raise ValueError(f"positional_affinity: reduce must be 'mean' or 'min', got {reduce!r}")
     if not scale > 0:
         raise ValueError(f"positional_affinity: scale must be > 0, got {scale}")
-    det_classes = np.asarray(det_classes)
-    trk_classes = np.asarray(trk_classes)
-    det_points = np.asarray(det_points)
-    trk_points = np.asarray(trk_points)
-    if det_points.shape[:1] != det_classes.shape or trk_points.shape[:1] != trk_classes.shape:
-        raise ValueError(
-            f"positional_affinity: points {det_points.shape} / classes {det_classes.shape}, "
-            f"points {trk_points.shape} / classes {trk_classes.shape} disagree"
-        )
-    aff = np.zeros((det_classes.shape[0], trk_classes.shape[0]), np.float64)  # (k, t)
-    for c in np.intersect1d(det_classes, trk_classes):  # only same-class pairs are computed
-        di, ti = np.nonzero(det_classes == c)[0], np.nonzero(trk_classes == c)[0]
-        closed = np.full(len(di), c == 0), np.full(len(ti), c == 0)
-        cd = polyline_chamfer_matrix(
-            det_points[di], trk_points[ti], *closed, reduce=reduce
-        )  # (k_c, t_c)
-        aff[np.ix_(di, ti)] = np.exp(-cd / scale)
-    return aff
+    k, t = len(det_classes), len(trk_classes)
+    aff = np.zeros((k, t), np.float64)
+    shared = np.zeros((k, t), np.float64) if share_gate > 0 else None
+    for di, ti, ab, ba in _same_class_blocks(det_points, det_classes, trk_points, trk_classes):
+        aff[np.ix_(di, ti)] = np.exp(-_reduce(ab.mean(axis=2), ba.mean(axis=2), reduce) / scale)
+        if shared is not None:
+            shared[np.ix_(di, ti)] = _shared(ab, ba, share_gate)
+    return aff, shared
+
+
+def _shared(ab: NDArray[np.float64], ba: NDArray[np.float64], gate: float) -> NDArray[np.float64]:
+    """(k_c, t_c) `overlap` from the point distances ab (k_c, t_c, n), ba (t_c, k_c, m)."""
+    return np.minimum((ab <= gate).mean(axis=2), (ba <= gate).mean(axis=2).T)
 
 
 def match_scores(
@@ -127,8 +177,8 @@ def match_scores(
 
     scores (k, t) in [0, 1]; a pair is admissible when score >= threshold and the classes agree.
     weights (k, t) >= 0: what the assignment maximises over the admissible pairs instead of the
-    scores (``Tracker``'s coverage). Returns (k,) int64: the matched column of each detection, -1
-    where unmatched.
+    scores (``Tracker.assign``'s weighing by ``overlap``). Returns (k,) int64: the matched
+    column of each detection, -1 where unmatched.
     """
     scores = np.asarray(scores, dtype=np.float64)
     det_classes = np.asarray(det_classes, dtype=np.int64)
@@ -176,16 +226,8 @@ def overlap(
     track's (crossings, class 0, as rings): about the length they share over the longer one's.
     0 across classes."""
     out = np.zeros((len(det_classes), len(trk_classes)), np.float64)  # (k, t)
-    det_points = np.asarray(det_points, np.float64)
-    trk_points = np.asarray(trk_points, np.float64)
-    for c in np.intersect1d(det_classes, trk_classes):
-        di, ti = np.nonzero(det_classes == c)[0], np.nonzero(trk_classes == c)[0]
-        closed_d, closed_t = np.full(len(di), c == 0), np.full(len(ti), c == 0)
-        seg_d = polyline_segments(det_points[di], closed_d)  # (k_c, n, 2, 2)
-        seg_t = polyline_segments(trk_points[ti], closed_t)  # (t_c, n, 2, 2)
-        trk_on = (point_to_segments(trk_points[ti], seg_d) <= gate).mean(axis=2)  # (t_c, k_c)
-        det_on = (point_to_segments(det_points[di], seg_t) <= gate).mean(axis=2)  # (k_c, t_c)
-        out[np.ix_(di, ti)] = np.minimum(trk_on.T, det_on)
+    for di, ti, ab, ba in _same_class_blocks(det_points, det_classes, trk_points, trk_classes):
+        out[np.ix_(di, ti)] = _shared(ab, ba, gate)
     return out
 
 
@@ -193,23 +235,16 @@ class Tracker:
     """Inference association with a tracking buffer (state lives in the instance, no globals).
 
     threshold: minimum score θ of an accepted match; max_age: a track unseen for more than this many
-    consecutive frames is dropped (0: tracks live one frame only); cover_gate: metres, > 0 to
-    weigh each admissible pair by how much the detection and the track's last view share
-    (``overlap``): where the range edge cuts a track's line into a long piece and a corner
-    piece, both lie on the track, and the long one continues it; a short piece lying on a long
-    line takes the short track, not the long one (0: the scores alone).
+    consecutive frames is dropped (0: tracks live one frame only).
     """
 
-    def __init__(self, threshold: float = 0.5, max_age: int = 3, cover_gate: float = 0.0) -> None:
+    def __init__(self, threshold: float = 0.5, max_age: int = 3) -> None:
         if not 0.0 <= threshold <= 1.0:
             raise ValueError(f"Tracker: threshold must be in [0, 1], got {threshold}")
         if max_age < 0:
             raise ValueError(f"Tracker: max_age must be >= 0, got {max_age}")
-        if not (np.isfinite(cover_gate) and cover_gate >= 0):
-            raise ValueError(f"Tracker: cover_gate must be finite and >= 0, got {cover_gate}")
         self.threshold = float(threshold)
         self.max_age = int(max_age)
-        self.cover_gate = float(cover_gate)
         self._tracks: list[Track] = []
         self._next_id = 0
 
@@ -263,14 +298,19 @@ class Tracker:
         det_points: NDArray[np.floating],
         pose: NDArray[np.float64],
         det_queries: NDArray[np.floating] | None = None,
+        shared: NDArray[np.floating] | None = None,
     ) -> NDArray[np.int64]:
         """Associates one frame's detections with the buffer and updates it.
 
         scores (k, t) in [0, 1] against `tracks` in order; det_classes (k,); det_points (k, n, 2)
-        EGO frame; pose (4, 4) ego->world; det_queries (k, D) or None. Returns the track id of each
-        detection (k,) int64 (fresh, increasing ids for unmatched detections). Matched tracks take
-        the detection's geometry (world frame) and query; tracks unseen for more than max_age frames
-        are dropped. On bad input nothing changes (ValueError).
+        EGO frame; pose (4, 4) ego->world; det_queries (k, D) or None; shared (k, t) or None: how
+        much each detection and track share (`overlap`), to weigh the admissible pairs by
+        (score x (``COVER_FLOOR`` + shared)): where the range edge cuts a track's line into a
+        long piece and a corner piece, both lie on the track and the long one continues it; a
+        short piece lying on a long line takes the short track, not the long one. Returns the
+        track id of each detection (k,) int64 (fresh, increasing ids for unmatched detections).
+        Matched tracks take the detection's geometry (world frame) and query; tracks unseen for
+        more than max_age frames are dropped. On bad input nothing changes (ValueError).
         """
         det_classes = np.asarray(det_classes, dtype=np.int64)
         det_points = np.asarray(det_points, dtype=np.float64)
@@ -294,10 +334,8 @@ class Tracker:
                 )
         trk_classes = np.array([tr.cls for tr in self._tracks], np.int64)  # (t,)
         weights = None
-        if self.cover_gate > 0 and k and self._tracks:
-            trk_pts = np.stack([world_to_ego(tr.points, pose) for tr in self._tracks])  # (t, n, 2)
-            shared = overlap(det_points, det_classes, trk_pts, trk_classes, self.cover_gate)
-            weights = np.asarray(scores, np.float64) * (COVER_FLOOR + shared)  # (k, t)
+        if shared is not None:
+            weights = np.asarray(scores, np.float64) * (COVER_FLOOR + np.asarray(shared))  # (k, t)
         cols = match_scores(scores, det_classes, trk_classes, self.threshold, weights)  # (k,)
 
         ids = np.empty(k, np.int64)
