@@ -14,7 +14,6 @@ from icmapper.mapping.tracker import (
     overlap,
     polyline_chamfer_matrix,
     positional_affinity,
-    positional_scores,
 )
 
 
@@ -85,9 +84,15 @@ def test_the_piece_covering_more_of_a_track_continues_it() -> None:
     assert scores[1, 0] > scores[0, 0] > 0.5
     shared = overlap(dets, cls, track, np.array([2]), 1.0)
     assert shared[0, 0] == pytest.approx(0.8, abs=0.06) and shared[1, 0] <= 0.25
-    both, from_both = positional_scores(dets, cls, track, np.array([2]), 1.5, "min", 1.0)
-    np.testing.assert_array_equal(both, scores)  # one pass gives both
-    np.testing.assert_array_equal(from_both, shared)
+    from icmapper.mapping.associate import association_scores
+    from icmapper.mapping.types import Detections
+
+    det = Detections(cls, np.ones(2, np.float32), dets.astype(np.float32))
+    kw = {"head": None, "to_unit": None, "device": "cpu", "positional_scale": 1.5}
+    both, from_both = association_scores(det, np.array([2]), track, None, **kw, share_gate=1.0)
+    np.testing.assert_allclose(both, scores, atol=1e-6)  # one pass over the distances: both
+    np.testing.assert_allclose(from_both, shared)
+    assert association_scores(det, np.array([2]), track, None, **kw)[1] is None
     for weigh, continued in ((None, 1), (shared, 0)):
         tr = Tracker(threshold=0.5, max_age=3)
         tr.assign(np.zeros((1, 0)), np.array([2]), track, pose)  # track 0

@@ -15,7 +15,12 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
-from icmapper.mapping.tracker import positional_scores
+from icmapper.mapping.tracker import (
+    affinity_of,
+    check_positional,
+    same_class_distances,
+    shared_of,
+)
 from icmapper.mapping.types import Detections
 
 if TYPE_CHECKING:
@@ -58,12 +63,12 @@ def association_scores(
                 to_unit(torch.as_tensor(trk_pts, device=device)),
             )  # (k, t)
         return s.cpu().numpy().astype(np.float64), None
-    return positional_scores(
-        det.points,
-        det.classes,
-        trk_pts,
-        trk_cls,
-        scale=positional_scale,
-        reduce="min",  # instances grow and shrink at the range edge
-        share_gate=share_gate,
-    )
+    check_positional(positional_scale, "min")
+    aff = np.zeros((k, t), np.float64)  # tracker.positional_affinity, reduce "min": instances
+    # grow and shrink at the range edge
+    shared = np.zeros((k, t), np.float64) if share_gate > 0 else None  # tracker.overlap
+    for di, ti, ab, ba in same_class_distances(det.points, det.classes, trk_pts, trk_cls):
+        aff[np.ix_(di, ti)] = affinity_of(ab, ba, positional_scale, "min")
+        if shared is not None:
+            shared[np.ix_(di, ti)] = shared_of(ab, ba, share_gate)
+    return aff, shared

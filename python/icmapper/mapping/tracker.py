@@ -93,7 +93,7 @@ def _reduce(ab: NDArray[np.float64], ba: NDArray[np.float64], reduce: str) -> ND
     return 0.5 * (ab + ba.T)
 
 
-def _same_class_blocks(
+def same_class_distances(
     det_points: NDArray[np.floating],
     det_classes: NDArray[np.integer],
     trk_points: NDArray[np.floating],
@@ -133,36 +133,30 @@ def positional_affinity(
     (`polyline_chamfer_matrix`; crossings, class 0, as rings). A Chamfer gate of g metres is the
     score threshold exp(-g / scale). ``reduce``: see `polyline_chamfer_matrix`.
     """
-    return positional_scores(det_points, det_classes, trk_points, trk_classes, scale, reduce)[0]
+    check_positional(scale, reduce)
+    aff = np.zeros((len(det_classes), len(trk_classes)), np.float64)  # (k, t)
+    for di, ti, ab, ba in same_class_distances(det_points, det_classes, trk_points, trk_classes):
+        aff[np.ix_(di, ti)] = affinity_of(ab, ba, scale, reduce)
+    return aff
 
 
-def positional_scores(
-    det_points: NDArray[np.floating],
-    det_classes: NDArray[np.integer],
-    trk_points: NDArray[np.floating],
-    trk_classes: NDArray[np.integer],
-    scale: float = DEFAULT_AFFINITY_SCALE,
-    reduce: str = "mean",
-    share_gate: float = 0.0,
-) -> tuple[NDArray[np.float64], NDArray[np.float64] | None]:
-    """`positional_affinity` (k, t) and, for ``share_gate`` > 0, `overlap` (k, t) at that gate
-    from the same point distances (None otherwise)."""
+def check_positional(scale: float, reduce: str) -> None:
+    """ValueError for a ``reduce`` other than "mean" / "min" or a ``scale`` not > 0."""
     if reduce not in ("mean", "min"):
         raise ValueError(f"positional_affinity: reduce must be 'mean' or 'min', got {reduce!r}")
     if not scale > 0:
         raise ValueError(f"positional_affinity: scale must be > 0, got {scale}")
-    k, t = len(det_classes), len(trk_classes)
-    aff = np.zeros((k, t), np.float64)
-    shared = np.zeros((k, t), np.float64) if share_gate > 0 else None
-    for di, ti, ab, ba in _same_class_blocks(det_points, det_classes, trk_points, trk_classes):
-        aff[np.ix_(di, ti)] = np.exp(-_reduce(ab.mean(axis=2), ba.mean(axis=2), reduce) / scale)
-        if shared is not None:
-            shared[np.ix_(di, ti)] = _shared(ab, ba, share_gate)
-    return aff, shared
 
 
-def _shared(ab: NDArray[np.float64], ba: NDArray[np.float64], gate: float) -> NDArray[np.float64]:
-    """(k_c, t_c) `overlap` from the point distances ab (k_c, t_c, n), ba (t_c, k_c, m)."""
+def affinity_of(
+    ab: NDArray[np.float64], ba: NDArray[np.float64], scale: float, reduce: str
+) -> NDArray[np.float64]:
+    """(k_c, t_c) `positional_affinity` from the point distances of `same_class_distances`."""
+    return np.exp(-_reduce(ab.mean(axis=2), ba.mean(axis=2), reduce) / scale)
+
+
+def shared_of(ab: NDArray[np.float64], ba: NDArray[np.float64], gate: float) -> NDArray[np.float64]:
+    """(k_c, t_c) `overlap` from the point distances of `same_class_distances`."""
     return np.minimum((ab <= gate).mean(axis=2), (ba <= gate).mean(axis=2).T)
 
 
@@ -226,8 +220,8 @@ def overlap(
     track's (crossings, class 0, as rings): about the length they share over the longer one's.
     0 across classes."""
     out = np.zeros((len(det_classes), len(trk_classes)), np.float64)  # (k, t)
-    for di, ti, ab, ba in _same_class_blocks(det_points, det_classes, trk_points, trk_classes):
-        out[np.ix_(di, ti)] = _shared(ab, ba, gate)
+    for di, ti, ab, ba in same_class_distances(det_points, det_classes, trk_points, trk_classes):
+        out[np.ix_(di, ti)] = shared_of(ab, ba, gate)
     return out
 
 
