@@ -93,8 +93,8 @@ class UpdateConfig:
     remove_z: float = 1.645  # one-sided 5 % (twenty-fourth round; 0: no test)
     move_threshold: tuple[float, float, float] = (np.inf, 0.4, 1.0)  # per class
     move_obs: int = 3
-    move_length: tuple[float, float, float] = (np.inf, 6.0, 8.0)  # per class (lane lines: 4 m
-    # until the fifteenth round; 6 m halved the false lane-line moves of learned detections)
+    move_length: tuple[float, float, float] = (np.inf, 12.0, 8.0)  # per class (lane lines: 4 m
+    # until the fifteenth round, 6 m until the twenty-fourth; docs/mapping.md)
     min_add_length: float = 3.0
     add_gate: float = 1.0
     add_frames: int = 3
