@@ -8,7 +8,7 @@ replay them (``ReplaySource``), so a comparison runs the detector once per frame
 from __future__ import annotations
 
 from collections.abc import Callable, Collection
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -361,12 +361,13 @@ def map_sequence(
     if reset:
         method.reset()
     frames = []
-    seen = []  # per frame: (pose (4, 4), the detections the method received)
+    seen = []  # per frame: (pose (4, 4), the detections the method received, without their
+    # query features: the check reads the geometry, and a long drive need not hold the rest)
     fresh = 1 << 50
     for i in range(len(seq)):
         frame = seq.frame(i, with_images=with_images)
         res = method.step(frame)
-        seen.append((np.asarray(frame.pose, dtype=np.float64), res.detections))
+        seen.append((np.asarray(frame.pose, np.float64), replace(res.detections, queries=None)))
         ids, fresh = unique_track_ids(res.track_ids, fresh)
         frames.append(
             FramePredictions(
