@@ -55,12 +55,11 @@ def bev_cache_dir(root: str, checkpoint: str, source: str, hz: float | None = No
 class CachedBev:
     """The learned detector as a ``DetectionSource`` whose encoder output is cached per frame."""
 
-    def __init__(self, inner: Any, cache: Path, vec: Any, subcell: tuple[int, ...] = ()) -> None:
+    def __init__(self, inner: Any, cache: Path, vec: Any) -> None:
         self.inner = inner
         self.detector = inner.detector
         self.cache = cache
         self.vec = vec
-        self.subcell = subcell  # classes whose lines move to the sub-cell maximum (subcell_lines)
         self.bevs: dict[int, np.ndarray] = {}
 
     def reset(self) -> None:
@@ -102,14 +101,6 @@ class CachedBev:
         bev_t = torch.from_numpy(self.bevs[frame.index])
         with torch.no_grad():
             inst, queries = self.detector.segment_instances(bev_t, self.vec)
-            if self.subcell:
-                from icmapper.models.vectorise import VectorInstances
-
-                det = self.detector
-                prob = det.seg(bev_t)[0].float().sigmoid().numpy()  # (K, X, Y)
-                pts = subcell_lines(inst, prob, det.rng.half_x, det.rng.half_y, self.subcell)
-                inst = VectorInstances(inst.classes, inst.scores, pts)
-                queries = det.instance_embedding(bev_t, torch.as_tensor(pts)[None])[0]
         order = np.argsort(-inst.scores, kind="stable")
         return Detections(
             classes=inst.classes[order].astype(np.int64),
@@ -117,41 +108,6 @@ class CachedBev:
             points=inst.points[order].astype(np.float32),
             queries=queries.numpy()[order].astype(np.float32),
         )
-
-
-def subcell_lines(
-    inst: Any, prob: np.ndarray, half_x: float, half_y: float, classes: tuple[int, ...]
-) -> np.ndarray:
-    """The points (N, P, 2) of ``inst`` with every line of ``classes`` moved, point by point,
-    along its normal to the maximum of the class's probabilities (K, X, Y) within 0.9 m (cubic
-    spline interpolation, parabolic peak; at most 0.75 m; median of 3 along the line): does the
-    skeleton sit off the probabilities' ridge by a fraction of a cell?"""
-    from scipy.ndimage import map_coordinates, spline_filter
-
-    steps = np.linspace(-0.9, 0.9, 13)  # (S,) metres along the normal
-    k_x, k_y = prob.shape[1:]
-    out = np.array(inst.points, dtype=np.float32)  # (N, P, 2)
-    for j in np.flatnonzero(np.isin(inst.classes, classes)):
-        field = spline_filter(prob[inst.classes[j]].astype(np.float64), order=3)
-        p = out[j].astype(np.float64)  # (P, 2)
-        d = np.gradient(p, axis=0)
-        d /= np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-9)
-        n = np.stack([-d[:, 1], d[:, 0]], axis=1)  # (P, 2) left normals
-        q = p[:, None, :] + steps[None, :, None] * n[:, None, :]  # (P, S, 2)
-        fi = (q[..., 0] + half_x) / (2 * half_x) * k_x - 0.5  # (P, S) cell index along x
-        fj = (q[..., 1] + half_y) / (2 * half_y) * k_y - 0.5
-        v = map_coordinates(field, [fi.ravel(), fj.ravel()], order=3, prefilter=False)
-        v = v.reshape(fi.shape)  # (P, S)
-        k = np.argmax(v, axis=1)  # (P,)
-        r = np.arange(len(p))
-        a, b, c = v[r, np.maximum(k - 1, 0)], v[r, k], v[r, np.minimum(k + 1, len(steps) - 1)]
-        inner = (k > 0) & (k < len(steps) - 1) & (a - 2 * b + c < 0)
-        frac = np.where(inner, 0.5 * (a - c) / np.where(inner, a - 2 * b + c, -1.0), 0.0)
-        shift = np.where(inner, steps[k] + frac * (steps[1] - steps[0]), 0.0)
-        s = np.pad(np.clip(shift, -0.75, 0.75), 1, mode="edge")
-        shift = np.median(np.stack([s[:-2], s[1:-1], s[2:]]), axis=0)  # (P,)
-        out[j] = (p + shift[:, None] * n).astype(np.float32)
-    return out
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -190,12 +146,6 @@ def main(argv: list[str] | None = None) -> int:
         help="also the two halves of each class's CD (precision, coverage) and the strays",
     )
     ap.add_argument(
-        "--subcell",
-        default="",
-        help="class indices (e.g. 1,2) whose lines move to the probabilities' sub-cell maximum "
-        "across them after vectorising (subcell_lines; an experiment, every method)",
-    )
-    ap.add_argument(
         "--stop",
         type=int,
         default=0,
@@ -232,8 +182,7 @@ def main(argv: list[str] | None = None) -> int:
     cfg = MapperConfig.from_dict(_parse_sets(a.set, MapperConfig), mapper.config)
     mapper = Mapper.from_checkpoint(a.checkpoint, config=cfg)
     rng = mapper.rng
-    subcell = tuple(int(c) for c in a.subcell.split(",") if c)
-    src = CachedBev(mapper.source, cache, vec, subcell)
+    src = CachedBev(mapper.source, cache, vec)
     names = a.methods.split(",")
     preds: dict[str, list] = {n: [] for n in names}
     maps: dict[str, list] = {n: [] for n in names}

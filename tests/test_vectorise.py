@@ -170,6 +170,7 @@ BAD_PARAMS: dict[str, Any] = {
     "ridge_classes": (0,),  # crossings are no lines
     "bend": 181.0,
     "band": -1.0,
+    "subcell": (0,),  # crossings are no lines
 }
 
 

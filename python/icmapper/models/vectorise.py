@@ -43,6 +43,9 @@ from the masks instead (``model.instances = "segmentation"``):
   or meeting at a corner) is first cut into one part per crossing (the engine's
   ``crossings::crossing_parts``);
 - an instance's score is the mean probability of its cells (its skeleton for lines).
+- optionally (``subcell``, per line class) each line point then moves across its line to the
+  maximum of its class's probabilities between the cells (``models.subcell``, in Python after the
+  engine's work): a skeleton runs through cell centres, the paint need not.
 
 The work runs in the native engine (``icmapper._icmap.vectorise``, Rust ``icmap_geom::vectorise``,
 one operation per file there), with the GIL released and the classes of a frame in parallel; this
@@ -58,6 +61,8 @@ from dataclasses import asdict, dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
+
+from icmapper.models.subcell import subcell_lines
 
 #: Class index of crossings (closed contours); the other classes are open polylines.
 CROSSING = 0
@@ -107,8 +112,11 @@ class VectoriseParams:
     band: float = 1.8  # a component of a line class that is not a ridge class (the kerbs) whose
     # skeleton lies farther than ``band * shrink`` from its edge over at least half its cells is
     # two kerbs merged (a median island): drawn as its outline shrunk by ``shrink`` (0: never)
+    subcell: tuple[int, ...] = ()  # line classes whose points then move across the line to the
+    # probabilities' maximum between the cells (``models.subcell``; () : none)
 
     def __post_init__(self) -> None:
+        object.__setattr__(self, "subcell", tuple(self.subcell))  # a list from TOML / JSON
         if self.upsample < 1 or self.num_points < 2:
             raise ValueError("vectorise: upsample must be >= 1 and num_points >= 2")
         for key in ("threshold", "ridge_threshold"):
@@ -116,10 +124,11 @@ class VectoriseParams:
                 raise ValueError(f"vectorise: {key} must be in (0, 1), got {getattr(self, key)}")
         if not self.ridge_sigma > 0 or not np.isfinite(self.ridge_sigma):
             raise ValueError(f"vectorise: ridge_sigma must be > 0, got {self.ridge_sigma}")
-        if not all(isinstance(k, int) and k >= 0 and k != CROSSING for k in self.ridge_classes):
-            raise ValueError(
-                f"vectorise: ridge_classes must be line class indices, got {self.ridge_classes}"
-            )
+        for key in ("ridge_classes", "subcell"):
+            if not all(isinstance(k, int) and k >= 0 and k != CROSSING for k in getattr(self, key)):
+                raise ValueError(
+                    f"vectorise: {key} must be line class indices, got {getattr(self, key)}"
+                )
         if not 0.0 <= self.rectangularity <= 1.0:
             raise ValueError(
                 f"vectorise: rectangularity must be in [0, 1], got {self.rectangularity}"
@@ -190,11 +199,15 @@ def vectorise(
     if prob.ndim != 3 or min(prob.shape) < 1:
         raise ValueError(f"vectorise: prob must be (K, X, Y), got {prob.shape}")
     p = (params or VectoriseParams()).for_grid(prob.shape[1], prob.shape[2], half_x, half_y)
+    engine = asdict(p)
+    subcell = engine.pop("subcell")  # a step after the engine's (models.subcell)
     classes, scores, points = _icmap.vectorise(
         np.ascontiguousarray(prob, dtype=np.float32),  # (K, X, Y)
         float(half_x),
         float(half_y),
-        **asdict(p),  # the settings by name (the engine checks them)
+        **engine,  # the settings by name (the engine checks them)
         parallel=PARALLEL_CLASSES,
     )  # (N,) int64, (N,) float32, (N, P, 2) float32
+    if subcell:
+        points = subcell_lines(classes, points, prob, half_x, half_y, subcell)  # (N, P, 2)
     return VectorInstances(classes, scores, points)
