@@ -6,6 +6,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import torch
+from icmapper.data.types import PerceptionRange
+from icmapper.models.config import ModelConfig
+from icmapper.models.detector import MapDetector
 from icmapper.models.subcell import MAX_SHIFT, subcell_lines
 from icmapper.models.vectorise import VectoriseParams, vectorise
 
@@ -88,3 +92,43 @@ def test_the_vectoriser_applies_it_to_the_chosen_classes() -> None:
 def test_bad_shapes_are_named() -> None:
     with pytest.raises(ValueError, match="subcell_lines"):
         subcell_lines(np.array([1, 1]), _line(0.0), _ridge(1, 0.0), HX, HY, (1,))
+
+
+class _FixedSeg(torch.nn.Module):
+    """A segmentation head that returns given logits (K, X, Y) whatever the BEV."""
+
+    def __init__(self, logits: torch.Tensor) -> None:
+        super().__init__()
+        self.logits = logits
+
+    def forward(self, bev: torch.Tensor) -> torch.Tensor:
+        return self.logits[None].expand(bev.shape[0], -1, -1, -1)
+
+
+def _detector(subcell: tuple[int, ...]) -> MapDetector:
+    torch.manual_seed(0)
+    cfg = ModelConfig(
+        backbone_widths=(8, 16), backbone_depths=(1, 1), channels=16, num_queries=8,
+        num_layers=1, topk=3, seg_head=True, instances="segmentation", subcell=subcell,
+    )  # fmt: skip
+    det = MapDetector(cfg, PerceptionRange.from_name("60x30"))
+    prob = np.clip(_ridge(2, 0.3), 1e-4, 1 - 1e-4)
+    det.seg = _FixedSeg(torch.as_tensor(np.log(prob / (1 - prob)), dtype=torch.float32))
+    return det
+
+
+def test_the_detector_places_lines_as_its_config_says() -> None:
+    """``model.subcell`` is the detector's (a checkpoint's fusion is trained on its lines); a
+    ``VectoriseParams.subcell`` given by the caller wins; the embeddings follow the points."""
+    bev = torch.randn(1, 16, 50, 25)
+    with torch.no_grad():
+        plain, q_plain = _detector(()).segment_instances(bev)
+        fine, q_fine = _detector((2,)).segment_instances(bev)
+        forced, _ = _detector((2,)).segment_instances(bev, VectoriseParams(subcell=()))
+    mid = slice(5, 15)
+    off = [np.abs(x.points[0, mid, 1] - 0.3).mean() for x in (fine, plain)]
+    assert off[0] < off[1]
+    assert np.array_equal(forced.points, plain.points)
+    assert not torch.equal(q_plain, q_fine)  # sampled along the moved points
+    with pytest.raises(ValueError, match="model.subcell"):
+        ModelConfig(subcell=(0,))  # crossings are no lines

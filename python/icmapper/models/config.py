@@ -48,6 +48,10 @@ class ModelConfig:
     #: metres: the segmentation targets' line radius (and the vectoriser's crossing shrink); 0:
     #: 0.75 of the larger BEV cell side (``segmentation.target_line_radius``)
     line_radius: float = 0.0
+    #: line classes whose vectorised points the detector moves to the probabilities' maximum
+    #: between the cells (``VectoriseParams.subcell``, ``models.subcell``); the association and
+    #: the fusion of a checkpoint are trained on the instances this gives
+    subcell: tuple[int, ...] = ()
 
     def __post_init__(self) -> None:
         positive = (
@@ -61,6 +65,11 @@ class ModelConfig:
                 )
         if not (math.isfinite(self.line_radius) and self.line_radius >= 0):
             raise ValueError(f"config key model.line_radius must be >= 0, got {self.line_radius}")
+        if not all(isinstance(k, int) and 0 < k < self.num_classes for k in self.subcell):
+            raise ValueError(
+                f"config key model.subcell must hold line class indices (1-{self.num_classes - 1}),"
+                f" got {self.subcell}"
+            )
         if self.channels % self.heads:
             raise ValueError(f"model.channels ({self.channels}) must be divisible by model.heads")
         if not 0 <= self.topk <= self.num_queries:

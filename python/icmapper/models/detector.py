@@ -252,6 +252,8 @@ class MapDetector(nn.Module):
             p = replace(
                 p, shrink=configured_line_radius(self.cfg, self.rng.half_x, self.rng.half_y)
             )
+        if p.subcell is None:  # the lines this checkpoint's association and fusion were trained on
+            p = replace(p, subcell=self.cfg.subcell)
         inst = vectorise(prob, self.rng.half_x, self.rng.half_y, p)
         pts = torch.as_tensor(inst.points, device=bev.device)  # (N, P, 2) metres
         return inst, self.instance_embedding(bev, pts[None])[0]

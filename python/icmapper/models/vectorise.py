@@ -112,11 +112,13 @@ class VectoriseParams:
     band: float = 1.8  # a component of a line class that is not a ridge class (the kerbs) whose
     # skeleton lies farther than ``band * shrink`` from its edge over at least half its cells is
     # two kerbs merged (a median island): drawn as its outline shrunk by ``shrink`` (0: never)
-    subcell: tuple[int, ...] = ()  # line classes whose points then move across the line to the
-    # probabilities' maximum between the cells (``models.subcell``; () : none)
+    subcell: tuple[int, ...] | None = None  # line classes whose points then move across the line
+    # to the probabilities' maximum between the cells (``models.subcell``); None: the detector's
+    # (``model.subcell``; none when called without one)
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "subcell", tuple(self.subcell))  # a list from TOML / JSON
+        if self.subcell is not None:  # a list from TOML / JSON
+            object.__setattr__(self, "subcell", tuple(self.subcell))
         if self.upsample < 1 or self.num_points < 2:
             raise ValueError("vectorise: upsample must be >= 1 and num_points >= 2")
         for key in ("threshold", "ridge_threshold"):
@@ -125,7 +127,8 @@ class VectoriseParams:
         if not self.ridge_sigma > 0 or not np.isfinite(self.ridge_sigma):
             raise ValueError(f"vectorise: ridge_sigma must be > 0, got {self.ridge_sigma}")
         for key in ("ridge_classes", "subcell"):
-            if not all(isinstance(k, int) and k >= 0 and k != CROSSING for k in getattr(self, key)):
+            chosen = getattr(self, key) or ()
+            if not all(isinstance(k, int) and k >= 0 and k != CROSSING for k in chosen):
                 raise ValueError(
                     f"vectorise: {key} must be line class indices, got {getattr(self, key)}"
                 )
@@ -200,7 +203,7 @@ def vectorise(
         raise ValueError(f"vectorise: prob must be (K, X, Y), got {prob.shape}")
     p = (params or VectoriseParams()).for_grid(prob.shape[1], prob.shape[2], half_x, half_y)
     engine = asdict(p)
-    subcell = engine.pop("subcell")  # a step after the engine's (models.subcell)
+    subcell = engine.pop("subcell") or ()  # a step after the engine's (models.subcell)
     classes, scores, points = _icmap.vectorise(
         np.ascontiguousarray(prob, dtype=np.float32),  # (K, X, Y)
         float(half_x),
