@@ -132,3 +132,14 @@ def test_the_detector_places_lines_as_its_config_says() -> None:
     assert not torch.equal(q_plain, q_fine)  # sampled along the moved points
     with pytest.raises(ValueError, match="model.subcell"):
         ModelConfig(subcell=(0,))  # crossings are no lines
+
+
+def test_the_config_reads_it() -> None:
+    from icmapper.settings import from_table
+
+    assert from_table(ModelConfig, {"subcell": [1, 2]}, "model").subcell == (1, 2)
+    assert from_table(ModelConfig, {"subcell": []}, "model").subcell == ()
+    with pytest.raises(ValueError, match="model.subcell must hold ints"):
+        from_table(ModelConfig, {"subcell": ["boundary"]}, "model")
+    with pytest.raises(ValueError, match="model.subcell"):
+        from_table(ModelConfig, {"subcell": [0]}, "model")

@@ -17,6 +17,10 @@ from typing import Any, TypeVar
 T = TypeVar("T")
 
 
+#: Element types of the tuple fields whose default is empty, by annotation.
+_TUPLE_ELEMENTS: dict[str, type] = {"tuple[int, ...]": int, "tuple[float, ...]": float}
+
+
 def convert_value(owner: str, f: dataclasses.Field, value: Any) -> Any:
     """Checks one plain value against the type of field ``f`` (known from its default) and
     converts it (ints to floats, lists to tuples). ``owner`` names the table in errors."""
@@ -39,9 +43,12 @@ def convert_value(owner: str, f: dataclasses.Field, value: Any) -> Any:
             raise ValueError(f"config key {key} must be a string, got {value!r}")
         return value
     if isinstance(default, tuple):
-        if not isinstance(value, list | tuple) or not value:
+        if not isinstance(value, list | tuple) or (default and not value):
             raise ValueError(f"config key {key} must be a non-empty list, got {value!r}")
-        elem = type(default[0])
+        # the element type: the default's, or the annotation's when the default is empty
+        elem = type(default[0]) if default else _TUPLE_ELEMENTS.get(str(f.type))
+        if elem is None:  # pragma: no cover - a field type this reader does not know
+            raise ValueError(f"config key {key}: unsupported type {f.type}")
         out = []
         for v in value:
             if elem is float and isinstance(v, int | float) and not isinstance(v, bool):
