@@ -224,3 +224,28 @@ def test_stage2_on_cached_bev(encoder_run: Path, tmp_path: Path) -> None:
     assert det and all(torch.equal(before[k], after[k]) for k in det)
     assert any(not torch.equal(before[k], after[k]) for k in after if k.startswith("fusion."))
     assert len(sorted((tmp_path / "bev-cache").rglob("*.pt"))) == 1
+
+
+def test_stage2_on_segmentation_instances_skips_the_decoder(tmp_path: Path) -> None:
+    """With ``model.instances = "segmentation"`` stage 2 needs the BEV alone: the set decoder
+    never runs (as at inference), on images or on cached BEVs, and both give the same loss."""
+    from icmapper.models.network import ICMapperNet
+
+    model = {**TINY["model"], "seg_head": True, "instances": "segmentation"}
+    cfg = config_from_dict({**TINY, "model": model})
+    torch.manual_seed(0)
+    net = ICMapperNet(cfg.model, cfg.perception_range).eval()
+
+    def no_decoder(*_: object, **__: object) -> None:
+        raise AssertionError("the set decoder ran")
+
+    net.detector.decoder.forward = no_decoder  # type: ignore[method-assign]
+    seqs = list(open_source("sim:val:1", image_size=(32, 64)))
+    bevs = encode_sequences(net.detector, seqs, cfg.perception_range, tmp_path / "c", (32, 64))
+    objective = Stage2Objective(net, cfg).eval()
+    images = collate_clips([ClipDataset(seqs, 4, cfg.perception_range)[0]])
+    cached = collate_bev_clips([BevClipDataset(seqs, bevs, 4, cfg.perception_range)[0]])
+    with torch.no_grad():
+        a, b = objective(images), objective(cached)
+    assert float(b["fused"]) == float(a["fused"])
+    assert float(b["fusion"]) == pytest.approx(float(a["fusion"]), rel=2e-2, abs=1e-4)

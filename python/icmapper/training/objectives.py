@@ -330,15 +330,25 @@ class Stage2Objective(nn.Module):
     @torch.no_grad()
     def detect(self, batch: dict) -> list[DetectorOutput]:
         """The frozen detector over the clip: one DetectorOutput per frame (from the cached
-        BEVs where the batch has them: ``stage2.cached_bev``)."""
+        BEVs where the batch has them: ``stage2.cached_bev``); with segmentation instances it
+        holds the BEV alone (no decoder queries)."""
         cached = batch["images"] is None
+        det = self.detector
+        # segmentation instances need the BEV alone: the set decoder is skipped, as at inference
+        bev_only = det.cfg.instances == "segmentation"
         outs, state = [], None
         for t in range(batch["poses"].shape[1]):
             motion = prev_to_cur(batch["poses"], t) if t > 0 else None
-            if cached:
-                out, state = self.detector.decode(batch["bev"][:, t], state, motion)
+            if bev_only:
+                if cached:
+                    bev = batch["bev"][:, t]  # (B, C, X, Y)
+                else:
+                    bev, state = det.encode_stream(*frame_cameras(batch, t), state, motion)
+                out = DetectorOutput([], [], bev.new_zeros((bev.shape[0], 0, bev.shape[1])), bev)
+            elif cached:
+                out, state = det.decode(batch["bev"][:, t], state, motion)
             else:
-                out, state = self.detector(*frame_cameras(batch, t), state, motion)
+                out, state = det(*frame_cameras(batch, t), state, motion)
             outs.append(out)
         return outs
 
