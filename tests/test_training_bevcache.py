@@ -197,12 +197,9 @@ def test_joined_training_sources() -> None:
             training_sequences(cfg)
 
 
-def test_stage2_on_cached_bev(encoder_run: Path, tmp_path: Path) -> None:
-    """Stage 2 reads the BEVs the cache holds: on a clip from the sequence start (where a clip's
-    fresh memory and the streamed one agree) the fusion loss is the one on images, and a run
-    trains the fusion and leaves the detector as it was."""
-    cfg = _cfg()
-    net = _net(cfg, encoder_run)
+def _stage2_both_ways(net: object, cfg: object, tmp_path: Path) -> tuple:
+    """Stage 2's objective on the first 4-frame clip of ``sim:val:1``, on images and on the BEVs
+    the cache holds: (objective, the cached batch, the losses on images, on cached BEVs)."""
     seqs = list(open_source("sim:val:1", image_size=(32, 64)))
     bevs = encode_sequences(net.detector, seqs, cfg.perception_range, tmp_path / "c", (32, 64))
     objective = Stage2Objective(net, cfg).eval()
@@ -210,6 +207,16 @@ def test_stage2_on_cached_bev(encoder_run: Path, tmp_path: Path) -> None:
     cached = collate_bev_clips([BevClipDataset(seqs, bevs, 4, cfg.perception_range)[0]])
     with torch.no_grad():
         a, b = objective(images), objective(cached)
+    return objective, cached, a, b
+
+
+def test_stage2_on_cached_bev(encoder_run: Path, tmp_path: Path) -> None:
+    """Stage 2 reads the BEVs the cache holds: on a clip from the sequence start (where a clip's
+    fresh memory and the streamed one agree) the fusion loss is the one on images, and a run
+    trains the fusion and leaves the detector as it was."""
+    cfg = _cfg()
+    net = _net(cfg, encoder_run)
+    objective, cached, a, b = _stage2_both_ways(net, cfg, tmp_path)
     assert float(a["fused"]) > 0 and float(b["fused"]) == float(a["fused"])
     assert float(b["fusion"]) == pytest.approx(float(a["fusion"]), rel=2e-2, abs=1e-4)
     with pytest.raises(ValueError, match="needs bev"):
@@ -240,12 +247,6 @@ def test_stage2_on_segmentation_instances_skips_the_decoder(tmp_path: Path) -> N
         raise AssertionError("the set decoder ran")
 
     net.detector.decoder.forward = no_decoder  # type: ignore[method-assign]
-    seqs = list(open_source("sim:val:1", image_size=(32, 64)))
-    bevs = encode_sequences(net.detector, seqs, cfg.perception_range, tmp_path / "c", (32, 64))
-    objective = Stage2Objective(net, cfg).eval()
-    images = collate_clips([ClipDataset(seqs, 4, cfg.perception_range)[0]])
-    cached = collate_bev_clips([BevClipDataset(seqs, bevs, 4, cfg.perception_range)[0]])
-    with torch.no_grad():
-        a, b = objective(images), objective(cached)
+    _, _, a, b = _stage2_both_ways(net, cfg, tmp_path)
     assert float(b["fused"]) == float(a["fused"])
     assert float(b["fusion"]) == pytest.approx(float(a["fusion"]), rel=2e-2, abs=1e-4)
