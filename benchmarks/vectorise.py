@@ -72,7 +72,9 @@ def _engine(prob: np.ndarray, hx: float, hy: float, parallel: bool) -> Any:
     from icmapper.models.vectorise import VectoriseParams
 
     p = VectoriseParams().for_grid(prob.shape[1], prob.shape[2], hx, hy)
-    return _icmap.vectorise(prob, hx, hy, **asdict(p), parallel=parallel)
+    engine = asdict(p)
+    engine.pop("subcell")  # a Python step after the engine's (models.subcell); off when shipped
+    return _icmap.vectorise(prob, hx, hy, **engine, parallel=parallel)
 
 
 def _per_frame(fn: Any, frames: list[np.ndarray], rounds: int) -> list[float]:
