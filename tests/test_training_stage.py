@@ -79,8 +79,12 @@ class FakeMap:
         m[:2, 3] = [x, y]
         ids = np.array(list(self.items), dtype=np.uint64)
         cls = np.array([v[0] for v in self.items.values()], dtype=np.int64)
-        pts = np.array([world_to_ego(v[1], m) for v in self.items.values()], dtype=np.float32)
-        pts = pts.reshape(-1, n_points, 2)
+        from icmapper.geom import resample_many
+
+        pts = np.array(
+            [resample_many(world_to_ego(v[1], m)[None], n_points, v[0] == 0)[0]
+             for v in self.items.values()], dtype=np.float32,
+        ).reshape(-1, n_points, 2)  # fmt: skip
         return ids, cls, pts, np.ones(pts.shape[:2], dtype=bool)
 
 
@@ -343,6 +347,19 @@ def test_stage2_with_fresh_fusion_restarts_it_from_its_initial_weights(
     assert any(not torch.equal(stage1[k], held[k]) for k in stage1 if k.startswith("fusion."))
     train(cfg, 2, tmp_path / "kept", init=trained, progress=False)  # without: a fine-tune
     assert all(torch.equal(captured["start"][k], held[k]) for k in held if k.startswith("fusion."))
+
+    # a fresh fusion of another shape (a finer view of the history) starts from the same file
+    finer = dataclasses.replace(
+        fresh, model=dataclasses.replace(fresh.model, fusion_history_points=7)
+    )
+    train(finer, 2, tmp_path / "finer", init=trained, max_steps=1, progress=False)
+    start = captured["start"]
+    assert start["fusion.embed_hist.index"].shape[0] == 7
+    assert all(torch.equal(start[k], held[k]) for k in held if not k.startswith("fusion."))
+    # without fresh_fusion the other shape is an error naming the checkpoint, not a crash later
+    kept = dataclasses.replace(finer, stage2=dataclasses.replace(finer.stage2, fresh_fusion=False))
+    with pytest.raises(ValueError, match="(?s)stage2.pt does not fit .*embed_hist"):
+        train(kept, 2, tmp_path / "bad", init=trained, max_steps=1, progress=False)
 
 
 def test_configs_load_and_validate(tmp_path: Path) -> None:

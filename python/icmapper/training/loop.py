@@ -294,10 +294,24 @@ def train(
     elif stage == 2:
         src = Path(init) if init is not None else out / "stage1.pt"
         fresh = cfg.stage2.fresh_fusion  # the seeded initial fusion, whatever src holds
-        initial = {k: v.clone() for k, v in net.fusion.state_dict().items()} if fresh else {}
-        net.load_state_dict(load_checkpoint(src)["model"])
-        if fresh:
-            net.fusion.load_state_dict(initial)
+        state = load_checkpoint(src)["model"]
+        if fresh:  # src's fusion is left out: it may be of another shape (model.fusion_*)
+            state = {k: v for k, v in state.items() if not k.startswith("fusion.")}
+            missing, unexpected = net.load_state_dict(state, strict=False)
+            if unexpected or any(not k.startswith("fusion.") for k in missing):
+                raise ValueError(
+                    f"checkpoint {src} does not fit this config: missing "
+                    f"{[k for k in missing if not k.startswith('fusion.')][:3]}, unexpected "
+                    f"{unexpected[:3]}"
+                )
+        else:
+            try:
+                net.load_state_dict(state)
+            except RuntimeError as err:  # e.g. a fusion of another shape
+                raise ValueError(
+                    f"checkpoint {src} does not fit this config (stage2.fresh_fusion = true "
+                    f"starts a fusion of another shape afresh): {err}"
+                ) from None
     elif cfg.stage1.freeze_encoder:
         if init is None:
             raise ValueError("stage1.freeze_encoder needs --init: the checkpoint of the encoder")
