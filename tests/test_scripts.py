@@ -141,3 +141,29 @@ def test_plot_verify_draws_kept_removed_and_cut(tmp_path: Path) -> None:
     assert [p.name for p in tmp_path.iterdir()] == ["v.png"]
     assert (tmp_path / "v.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert "1 instances removed, 1 with ends cut" in title and ring in gm.ids().tolist()
+
+
+def test_map_experiment_reestimate_moves_lines_to_the_mean_of_their_views() -> None:
+    """``reestimate`` (``--reestimate GATE``): each point of a map line goes to the mean of the
+    nearest points of the same-class detections within the gate, one per detection; points no
+    detection reached, other classes' views and crossings stay as they were."""
+    import numpy as np
+
+    mod = _script("map_experiment")
+    x = np.linspace(0.0, 10.0, 11)
+    line = np.c_[x, np.full_like(x, 0.3)]  # a lane line drawn 0.3 m left of y = 0
+    ring = np.array([[0.0, 5.0], [4.0, 5.0], [4.0, 8.0], [0.0, 8.0]])
+    items = [(1, line, False, 3.0), (0, ring, True, 2.0)]
+    dets = [
+        (1, np.c_[x[:6], np.zeros(6)]),  # two views of its first half, at y = 0 and 0.2
+        (1, np.c_[x[:6], np.full(6, 0.2)]),
+        (2, np.c_[x, np.full_like(x, 0.25)]),  # a kerb view: another class
+        (1, np.c_[x, np.full_like(x, 3.0)]),  # the next lane line, beyond the gate
+        (0, ring + 0.5),
+    ]
+    out = mod.reestimate(items, dets, 1.0)
+    assert [(k, closed, obs) for k, _, closed, obs in out] == [(1, False, 3.0), (0, True, 2.0)]
+    moved = out[0][1]
+    np.testing.assert_allclose(moved[:6], np.c_[x[:6], np.full(6, 0.1)], atol=1e-9)
+    np.testing.assert_allclose(moved[7:], line[7:])  # no view within 1 m (x = 6 is 1.0 away)
+    np.testing.assert_array_equal(out[1][1], ring)
