@@ -14,8 +14,8 @@ from every view that drew them (``reestimate``); ``--json`` writes them.
     .venv/bin/python scripts/map_experiment.py --source sim:val:4 \
         --methods icmapper,post-track,polymerge --set map_nms=true
 
-A cached BEV belongs to its checkpoint (the file's bytes) and source: a retrained checkpoint at
-the same path gets its own.
+A cached BEV belongs to its encoder (the digest of its parameters) and source: a retrained
+encoder gets its own, a checkpoint whose fusion or association alone changed shares it.
 """
 
 from __future__ import annotations
@@ -45,12 +45,17 @@ def _parse_sets(items: list[str], cls: type) -> dict[str, Any]:
     return table
 
 
-def bev_cache_dir(root: str, checkpoint: str, source: str, hz: float | None = None) -> Path:
-    """The folder of ``CachedBev``'s encoder outputs for one checkpoint file (by its bytes) and
-    source (and keyframe rate, when not the source's own)."""
-    weights = hashlib.sha1(Path(checkpoint).read_bytes()).hexdigest()
+def bev_cache_dir(
+    root: str, detector: Any, image_size: tuple[int, int], source: str, hz: float | None = None
+) -> Path:
+    """The folder of ``CachedBev``'s encoder outputs for one encoder (its parameters' digest,
+    ``training.bevcache.encoder_digest``: checkpoints that differ only after the BEV, such as a
+    retrained fusion, share it) and source (and keyframe rate, when not the source's own)."""
+    from icmapper.training.bevcache import encoder_digest
+
+    encoder = encoder_digest(detector, image_size)
     rate = f"|{hz}" if hz is not None else ""
-    return Path(root) / hashlib.sha1(f"{weights}|{source}{rate}".encode()).hexdigest()[:10]
+    return Path(root) / hashlib.sha1(f"{encoder}|{source}{rate}".encode()).hexdigest()[:10]
 
 
 class CachedBev:
@@ -185,11 +190,12 @@ def main(argv: list[str] | None = None) -> int:
         from icmapper.data.sim.driver import drive
 
         sim_sequences.drive = partial(drive, hz=a.hz)  # type: ignore[assignment]
-    seqs = open_source(a.source, image_size=checkpoint_settings(a.checkpoint)[1])
+    image_size = checkpoint_settings(a.checkpoint)[1]
+    seqs = open_source(a.source, image_size=image_size)
     if a.stop:
         seqs = [with_stop(s, a.stop, a.stop_at) for s in seqs]
-    cache = bev_cache_dir(a.cache, a.checkpoint, a.source, a.hz)
     mapper = Mapper.from_checkpoint(a.checkpoint)
+    cache = bev_cache_dir(a.cache, mapper.source.detector, image_size, a.source, a.hz)
     cfg = MapperConfig.from_dict(_parse_sets(a.set, MapperConfig), mapper.config)
     mapper = Mapper.from_checkpoint(a.checkpoint, config=cfg)
     rng = mapper.rng

@@ -37,16 +37,16 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out", required=True)
     a = ap.parse_args(argv)
 
-    seqs = open_source(a.source, image_size=checkpoint_settings(a.checkpoint)[1])
+    image_size = checkpoint_settings(a.checkpoint)[1]
+    seqs = open_source(a.source, image_size=image_size)
     if a.drive is not None:
         seqs = [s for s in seqs if s.name == a.drive]
         if not seqs:
             raise SystemExit(f"{a.source} has no drive {a.drive!r}")
     mapper = Mapper.from_checkpoint(a.checkpoint)
     config = mapper.config  # the shipped settings, the check's included
-    src = CachedBev(
-        mapper.source, bev_cache_dir(a.cache, a.checkpoint, a.source), VectoriseParams()
-    )
+    cache = bev_cache_dir(a.cache, mapper.source.detector, image_size, a.source)
+    src = CachedBev(mapper.source, cache, VectoriseParams())
     mapper.source = src
     best = None
     for seq in seqs:

@@ -167,3 +167,27 @@ def test_map_experiment_reestimate_moves_lines_to_the_mean_of_their_views() -> N
     np.testing.assert_allclose(moved[:6], np.c_[x[:6], np.full(6, 0.1)], atol=1e-9)
     np.testing.assert_allclose(moved[7:], line[7:])  # no view within 1 m (x = 6 is 1.0 away)
     np.testing.assert_array_equal(out[1][1], ring)
+
+
+def test_map_experiment_bev_cache_belongs_to_the_encoder() -> None:
+    """``bev_cache_dir``: keyed by the encoder's parameters, the image size and the source, so a
+    checkpoint whose fusion alone was retrained reads the BEVs already cached, and a changed
+    encoder never does."""
+    import torch
+    from icmapper.models.network import ICMapperNet
+    from icmapper.testing.configs import tiny_config
+
+    mod = _script("map_experiment")
+    torch.manual_seed(0)
+    cfg = tiny_config()
+    net = ICMapperNet(cfg.model, cfg.perception_range)
+    key = mod.bev_cache_dir("/c", net.detector, (32, 88), "sim:val:4")
+    with torch.no_grad():
+        next(net.fusion.parameters()).add_(1.0)
+    assert mod.bev_cache_dir("/c", net.detector, (32, 88), "sim:val:4") == key
+    assert mod.bev_cache_dir("/c", net.detector, (64, 176), "sim:val:4") != key
+    assert mod.bev_cache_dir("/c", net.detector, (32, 88), "sim:val:12") != key
+    assert mod.bev_cache_dir("/c", net.detector, (32, 88), "sim:val:4", hz=4.0) != key
+    with torch.no_grad():
+        next(net.detector.backbone.parameters()).add_(1.0)
+    assert mod.bev_cache_dir("/c", net.detector, (32, 88), "sim:val:4") != key
