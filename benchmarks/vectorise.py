@@ -66,15 +66,11 @@ def _engine(prob: np.ndarray, hx: float, hy: float, parallel: bool) -> Any:
     """The engine's call with the shipped settings resolved for this grid, as
     ``models.vectorise.vectorise`` makes it (the binding's own defaults are the 50x25 grid's:
     its ``shrink`` of 0.9 m is twice the 100x50 grid's target radius)."""
-    from dataclasses import asdict
-
     from icmapper import _icmap
     from icmapper.models.vectorise import VectoriseParams
 
     p = VectoriseParams().for_grid(prob.shape[1], prob.shape[2], hx, hy)
-    engine = asdict(p)
-    engine.pop("subcell")  # a Python step after the engine's (models.subcell); off when shipped
-    return _icmap.vectorise(prob, hx, hy, **engine, parallel=parallel)
+    return _icmap.vectorise(prob, hx, hy, **p.engine_settings(), parallel=parallel)
 
 
 def _per_frame(fn: Any, frames: list[np.ndarray], rounds: int) -> list[float]:

@@ -58,6 +58,7 @@ of ``python -m benchmarks vectorise``; it is not part of the runtime.
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass, replace
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -158,6 +159,13 @@ class VectoriseParams:
 
         return replace(self, shrink=target_line_radius(bev_x, bev_y, half_x, half_y))
 
+    def engine_settings(self) -> dict[str, Any]:
+        """The settings the engine's ``_icmap.vectorise`` takes, by name: all but ``subcell``,
+        a step in Python after the engine's (``models.subcell``)."""
+        settings = asdict(self)
+        del settings["subcell"]
+        return settings
+
 
 @dataclass(frozen=True)
 class VectorInstances:
@@ -202,13 +210,12 @@ def vectorise(
     if prob.ndim != 3 or min(prob.shape) < 1:
         raise ValueError(f"vectorise: prob must be (K, X, Y), got {prob.shape}")
     p = (params or VectoriseParams()).for_grid(prob.shape[1], prob.shape[2], half_x, half_y)
-    engine = asdict(p)
-    subcell = engine.pop("subcell") or ()  # a step after the engine's (models.subcell)
+    subcell = p.subcell or ()  # a step after the engine's (models.subcell)
     classes, scores, points = _icmap.vectorise(
         np.ascontiguousarray(prob, dtype=np.float32),  # (K, X, Y)
         float(half_x),
         float(half_y),
-        **engine,  # the settings by name (the engine checks them)
+        **p.engine_settings(),  # the settings by name (the engine checks them)
         parallel=PARALLEL_CLASSES,
     )  # (N,) int64, (N,) float32, (N, P, 2) float32
     if subcell:
