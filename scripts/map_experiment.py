@@ -179,6 +179,8 @@ def main(argv: list[str] | None = None) -> int:
         "routes; the sources' rate is data.types.KEYFRAME_HZ, 2)",
     )
     a = ap.parse_args(argv)
+    if not (np.isfinite(a.reestimate) and a.reestimate >= 0):
+        ap.error(f"--reestimate must be a finite distance >= 0, got {a.reestimate}")
 
     vec = replace(VectoriseParams(), **_parse_sets(a.vec, VectoriseParams))
     from icmapper.models.network import checkpoint_settings
