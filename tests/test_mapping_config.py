@@ -35,6 +35,10 @@ def test_config_from_dict_checks_names_types_and_ranges() -> None:
     for bad in (0.0, -1.0):
         with pytest.raises(ValueError, match="city_tolerance must be > 0"):
             MapperConfig.from_dict({"city_tolerance": bad})
+    assert MapperConfig.from_dict({"fusion_classes": [0, 1]}).fusion_classes == (0, 1)
+    for bad in ([0, 3], [1, 1], [-1]):
+        with pytest.raises(ValueError, match="fusion_classes must be distinct class indices"):
+            MapperConfig.from_dict({"fusion_classes": bad})
     # every field has help text for the command line, every flag is a field
     helps = MapperConfig.help()
     assert all(h.strip() for h in helps.values()) and set(CLI_FLAGS) <= set(helps)

@@ -649,3 +649,39 @@ def test_tracks_report_the_instance_they_map_into() -> None:
     # the instance's own track 7 is in the frame: the piece 14 keeps its id, wherever it stands
     assert instance_ids(np.array([14, 7]), alias).tolist() == [14, 7]
     assert instance_ids(np.array([], np.int64), alias).tolist() == []
+
+
+def test_fusion_refines_only_its_classes() -> None:
+    """``fuse_with_history(classes=...)``: a detection of a class left out passes as if it had no
+    history (unchanged, not marked fused); the others go through the network."""
+    import torch
+    from icmapper.mapping.fuse import fuse_with_history
+
+    def shift(
+        points: torch.Tensor, classes: torch.Tensor, hist: torch.Tensor, has: torch.Tensor
+    ) -> list[torch.Tensor]:
+        """A stand-in network: rows with history move 1 m in y, as every layer's output."""
+        return [torch.where(has[:, None, None], points + torch.tensor([0.0, 1.0]), points)]
+
+    pts = np.zeros((3, 5, 2), np.float32)  # (m, P, 2): one detection per class
+    pts[:, :, 0] = np.arange(5.0)
+    det = Detections(
+        classes=np.array([MapClass.PED_CROSSING, MapClass.DIVIDER, MapClass.BOUNDARY]),
+        scores=np.ones(3, np.float32),
+        points=pts,
+    )
+    hist = np.zeros((3, 4, 2), np.float32)  # (h, S, 2)
+    rows = {10: 0, 11: 1, 12: 2}
+    for classes, want in (((0, 1, 2), [1, 1, 1]), ((0, 1), [1, 1, 0]), ((2,), [0, 0, 1])):
+        out, fused = fuse_with_history(
+            det,
+            [10, 11, 12],
+            rows,
+            hist,
+            shift,
+            4,
+            "cpu",
+            classes=classes,  # type: ignore[arg-type]
+        )
+        np.testing.assert_array_equal(fused, np.array(want, bool))
+        np.testing.assert_allclose(out[:, :, 1], np.array(want, np.float32)[:, None] * np.ones(5))

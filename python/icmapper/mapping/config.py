@@ -13,6 +13,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field, fields
 from typing import Any
 
+from icmapper.data.types import NUM_CLASSES
 from icmapper.mapping.crossings import CROSSING_MERGES
 from icmapper.mapping.splice import FUSED_MERGES
 from icmapper.settings import from_table, to_plain
@@ -121,6 +122,11 @@ class MapperConfig:
     history_points: int = _f(20, "points per sampled history instance (the network's own value)")
     use_association: bool = _f(True, "learned association (false: positional affinity)")
     use_fusion: bool = _f(True, "spatial fusion with the map's history (false: merge as detected)")
+    fusion_classes: tuple[int, ...] = _f(
+        (0, 1, 2),
+        "class indices (data.types.CLASS_NAMES) whose detections the fusion refines; the others "
+        "merge as detected, as with use_fusion=false",
+    )
     fused_merge: str = _f(
         "splice",
         "how a fused polyline (one that had a history) merges into its instance: 'splice' (it "
@@ -198,6 +204,13 @@ class MapperConfig:
         if not 0.0 <= self.min_travel < float("inf"):
             raise ValueError(
                 f"MapperConfig.min_travel must be finite and >= 0, got {self.min_travel}"
+            )
+        if len(set(self.fusion_classes)) != len(self.fusion_classes) or not all(
+            0 <= c < NUM_CLASSES for c in self.fusion_classes
+        ):
+            raise ValueError(
+                f"MapperConfig.fusion_classes must be distinct class indices in [0, {NUM_CLASSES}),"
+                f" got {list(self.fusion_classes)}"
             )
         if self.fused_merge not in FUSED_MERGES:
             raise ValueError(

@@ -26,13 +26,17 @@ def fuse_with_history(
     fusion: FusionModule,
     history_points: int,
     device: str | torch.device,
+    classes: tuple[int, ...] | None = None,
 ) -> tuple[NDArray[np.float32], NDArray[np.bool_]]:
     """The fused points (m, P, 2) ego and which detections were fused (m,).
 
     targets: the global instance each of the m detections maps into; hist_row: instance id -> row
-    of the sampled history ``hist_pts`` (h, S, 2) ego, S = ``history_points``."""
+    of the sampled history ``hist_pts`` (h, S, 2) ego, S = ``history_points``; classes: the
+    classes fused (None: all); a detection of another class passes as if it had no history."""
     none = np.zeros(len(det), bool)
     has = np.array([t in hist_row for t in targets], bool)  # (m,)
+    if classes is not None:
+        has &= np.isin(det.classes, classes)
     if not has.any():
         return det.points.copy(), none
     import torch

@@ -401,7 +401,14 @@ class Mapper:
             return det.points.copy(), np.zeros(len(det), bool)
         targets = [self._alias.get(int(i), int(i)) for i in track_ids]
         return fuse_with_history(
-            det, targets, hist_row, hist_pts, self.fusion, self.config.history_points, self.device
+            det,
+            targets,
+            hist_row,
+            hist_pts,
+            self.fusion,
+            self.config.history_points,
+            self.device,
+            classes=self.config.fusion_classes,
         )
 
     def _merge(
