@@ -212,7 +212,11 @@ def main(argv: list[str] | None = None) -> int:
         cached = src.load(seq.name)
         rec = RecordingSource(src)
         mapper.source = rec
-        for n in names:
+        if "icmapper" not in names:  # the detections the other methods replay, recorded alone
+            rec.reset()
+            for i in range(len(seq)):
+                rec.detect(seq.frame(i, with_images=not cached))
+        for n in sorted(names, key=lambda n: n != "icmapper"):  # the full mapper records them
             if n.startswith("icmapper"):
                 variant = "full" if n == "icmapper" else n[len("icmapper-") :]
                 m = (

@@ -191,3 +191,23 @@ def test_map_experiment_bev_cache_belongs_to_the_encoder() -> None:
     with torch.no_grad():
         next(net.detector.backbone.parameters()).add_(1.0)
     assert mod.bev_cache_dir("/c", net.detector, (32, 88), "sim:val:4") != key
+
+
+def test_map_experiment_methods_in_any_order(tiny_checkpoint: Path, tmp_path: Path) -> None:
+    """The other methods replay the detections the full mapper records: asked without it, or
+    before it, they get the same detections and the same figures as after it."""
+    import json
+
+    mod = _script("map_experiment")
+    common = ["--source", "sim:val:1", "--checkpoint", str(tiny_checkpoint)]
+    common += ["--cache", str(tmp_path / "bev")]
+    out = {}
+    for methods in ("post-track,icmapper-base", "icmapper,icmapper-base,post-track"):
+        f = tmp_path / f"{methods}.json"
+        assert mod.main([*common, "--methods", methods, "--json", str(f)]) == 0
+        out[methods] = json.loads(f.read_text())
+    alone, after = out["post-track,icmapper-base"], out["icmapper,icmapper-base,post-track"]
+    assert set(alone) == {"post-track", "icmapper-base"}
+    for n in alone:
+        assert alone[n]["detection"] == after[n]["detection"]
+        assert alone[n]["mapping"] == after[n]["mapping"]
