@@ -678,10 +678,10 @@ def test_fusion_refines_only_its_classes() -> None:
             [10, 11, 12],
             rows,
             hist,
-            shift,
+            shift,  # type: ignore[arg-type]
             4,
             "cpu",
-            classes=classes,  # type: ignore[arg-type]
+            classes=classes,
         )
         np.testing.assert_array_equal(fused, np.array(want, bool))
         np.testing.assert_allclose(out[:, :, 1], np.array(want, np.float32)[:, None] * np.ones(5))
