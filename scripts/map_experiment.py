@@ -181,6 +181,12 @@ def main(argv: list[str] | None = None) -> int:
     a = ap.parse_args(argv)
     if not (np.isfinite(a.reestimate) and a.reestimate >= 0):
         ap.error(f"--reestimate must be a finite distance >= 0, got {a.reestimate}")
+    names = a.methods.split(",")
+    for n in names:  # before any work: a misspelt method would fail only after recording
+        try:
+            method(n)
+        except ValueError as e:
+            ap.error(f"--methods: {e}")
 
     vec = replace(VectoriseParams(), **_parse_sets(a.vec, VectoriseParams))
     from icmapper.models.network import checkpoint_settings
@@ -202,7 +208,6 @@ def main(argv: list[str] | None = None) -> int:
     mapper = Mapper.from_checkpoint(a.checkpoint, config=cfg)
     rng = mapper.rng
     src = CachedBev(mapper.source, cache, vec)
-    names = a.methods.split(",")
     preds: dict[str, list] = {n: [] for n in names}
     maps: dict[str, list] = {n: [] for n in names}
     gts, ggts = [], []

@@ -211,3 +211,13 @@ def test_map_experiment_methods_in_any_order(tiny_checkpoint: Path, tmp_path: Pa
     for n in alone:
         assert alone[n]["detection"] == after[n]["detection"]
         assert alone[n]["mapping"] == after[n]["mapping"]
+
+
+def test_map_experiment_refuses_an_unknown_method_before_any_work(tmp_path: Path) -> None:
+    """A misspelt method is refused at once, naming the known ones (it used to fail only after the
+    detections of the first drive were recorded)."""
+    mod = _script("map_experiment")
+    with pytest.raises(SystemExit):
+        mod.main(["--source", "sim:val:1", "--methods", "post-track,bogus",
+                  "--cache", str(tmp_path / "bev")])  # fmt: skip
+    assert not (tmp_path / "bev").exists()
